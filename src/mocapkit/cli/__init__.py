@@ -1,0 +1,1 @@
+"""The ``mocapkit`` command: parse arguments, call the library, write results. No numerics."""

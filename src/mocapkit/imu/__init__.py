@@ -1,0 +1,1 @@
+"""Inertial orientation estimation: filters, initialisation, calibration, evaluation."""

@@ -1,0 +1,1 @@
+"""File formats. Readers convert units on read (SI inside); no maths here."""

@@ -1,0 +1,85 @@
+"""Reader for BROAD trials (Laidig et al., "BROAD - A Benchmark for Robust Inertial
+Orientation Estimation", Data 2021), HDF5 files from ``data_hdf5/``.
+
+Each file holds ``imu_gyr`` [rad/s], ``imu_acc`` [m/s^2], ``imu_mag`` [uT], the optical
+reference ``opt_quat`` [w, x, y, z] (already in the IMU's ENU frame, NaN where the
+cameras lost the body), ``opt_pos`` [m], the boolean ``movement`` mask and the
+attribute ``sampling_rate`` [Hz].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from mocapkit.errors import FileFormatError
+from mocapkit.series import ImuRecording, OrientationSeries
+
+_REQUIRED = ("imu_gyr", "imu_acc", "imu_mag", "opt_quat", "movement")
+
+
+@dataclass(frozen=True)
+class BroadTrial:
+    """One BROAD trial: IMU samples, optical reference orientation and movement mask."""
+
+    name: str
+    imu: ImuRecording
+    reference: OrientationSeries
+    movement: np.ndarray  # (N,) bool: samples that count for the error metric
+    position: np.ndarray  # (N, 3) optical position [m]
+
+    @property
+    def rate_hz(self) -> float:
+        return float(self.imu.meta["sampling_rate"])
+
+
+def read_broad_trial(path: str | Path) -> BroadTrial:
+    """Read one BROAD ``.hdf5`` trial."""
+    import h5py
+
+    p = Path(path)
+    try:
+        f = h5py.File(p, "r")
+    except OSError as exc:
+        raise FileFormatError(f"{p}: not a readable HDF5 file ({exc})") from exc
+    with f:
+        missing = [k for k in _REQUIRED if k not in f]
+        if missing:
+            raise FileFormatError(
+                f"{p}: missing dataset(s) {', '.join(missing)}; is this a BROAD data_hdf5 trial?"
+            )
+        if "sampling_rate" not in f.attrs:
+            raise FileFormatError(f"{p}: missing attribute 'sampling_rate'")
+        rate = float(f.attrs["sampling_rate"])
+        gyr = np.asarray(f["imu_gyr"], dtype=np.float64)
+        acc = np.asarray(f["imu_acc"], dtype=np.float64)
+        mag = np.asarray(f["imu_mag"], dtype=np.float64)
+        quat = np.asarray(f["opt_quat"], dtype=np.float64)
+        movement = np.asarray(f["movement"], dtype=bool).reshape(-1)
+        pos = (
+            np.asarray(f["opt_pos"], dtype=np.float64)
+            if "opt_pos" in f
+            else np.full((len(gyr), 3), np.nan)
+        )
+    name = p.stem
+    time = np.arange(len(gyr)) / rate
+    imu = ImuRecording(
+        time, gyr, acc, mag, name=name, meta={"sampling_rate": rate, "source": str(p)}
+    )
+    ref = OrientationSeries(time, quat, name=f"{name}.reference")
+    movement.setflags(write=False)
+    pos.setflags(write=False)
+    return BroadTrial(name=name, imu=imu, reference=ref, movement=movement, position=pos)
+
+
+def list_broad_trials(directory: str | Path) -> list[Path]:
+    """The ``*.hdf5`` trials in a directory, sorted by name."""
+    d = Path(directory)
+    if not d.is_dir():
+        raise FileFormatError(f"{d}: not a directory of BROAD .hdf5 trials")
+    files = sorted(d.glob("*.hdf5"))
+    if not files:
+        raise FileFormatError(f"{d}: no .hdf5 files found (expected BROAD's data_hdf5 trials)")
+    return files

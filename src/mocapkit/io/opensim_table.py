@@ -1,0 +1,145 @@
+"""OpenSim storage tables: ``.mot`` and ``.sto`` (numeric columns, or quaternion
+columns as written by OpenSense, ``w,x,y,z`` in one tab-separated cell).
+
+A table is ``time`` (N,) plus named columns. Angles in ``.mot`` files are in degrees
+when the header says ``inDegrees=yes``; :func:`read_table` returns what the file
+holds and reports ``in_degrees`` so callers convert at the edge.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mocapkit._validate import FloatArray, as_float_array, check_shape
+from mocapkit.errors import FileFormatError, ShapeError
+
+
+@dataclass(frozen=True)
+class OpenSimTable:
+    """Columns over time. ``data`` is (N, k) for numeric tables, (N, k, 4) for quaternion ones."""
+
+    time: FloatArray
+    labels: list[str]
+    data: FloatArray
+    in_degrees: bool = False
+    header: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def is_quaternion(self) -> bool:
+        return self.data.ndim == 3
+
+    def column(self, label: str) -> FloatArray:
+        """One column by name; the error lists the available names."""
+        try:
+            i = self.labels.index(label)
+        except ValueError:
+            raise FileFormatError(
+                f"column {label!r} not in table; available: {', '.join(self.labels)}"
+            ) from None
+        return self.data[:, i]
+
+
+def write_table(
+    path: str | Path,
+    time: Any,
+    labels: list[str],
+    data: Any,
+    *,
+    name: str = "mocapkit",
+    in_degrees: bool = True,
+    data_type: str | None = None,
+) -> Path:
+    """Write a ``.mot``/``.sto`` table.
+
+    Args:
+        time: (N,) seconds.
+        labels: k column names.
+        data: (N, k) values, or (N, k, 4) quaternions ``[w, x, y, z]`` (written as
+            OpenSense's quaternion ``.sto``, ``DataType=Quaternion``).
+        in_degrees: value of the ``inDegrees`` header (callers convert angles first).
+    """
+    t = as_float_array(time, "time")
+    check_shape(t, "time", None)
+    d = as_float_array(data, "data")
+    quat = d.ndim == 3
+    if quat:
+        check_shape(d, "data", t.shape[0], len(labels), 4)
+    else:
+        check_shape(d, "data", t.shape[0], len(labels))
+    for i, label in enumerate(labels):
+        if not label or any(c in label for c in "\t\n"):
+            raise ShapeError(f"labels[{i}]: {label!r} is not a valid column name")
+    p = Path(path)
+    lines = [name, "version=1" if not quat else "version=3"]
+    if quat:
+        rate = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        lines += [
+            f"DataRate={rate:.6f}",
+            f"DataType={data_type or 'Quaternion'}",
+            "OpenSimVersion=4.1",
+        ]
+    else:
+        lines += [f"nRows={t.shape[0]}", f"nColumns={len(labels) + 1}"]
+        lines.append(f"inDegrees={'yes' if in_degrees else 'no'}")
+    lines.append("endheader")
+    lines.append("\t".join(["time", *labels]))
+    for i in range(t.shape[0]):
+        if quat:
+            cells = [",".join(f"{v:.10g}" for v in d[i, j]) for j in range(len(labels))]
+        else:
+            cells = [f"{v:.10g}" for v in d[i]]
+        lines.append("\t".join([f"{t[i]:.10g}", *cells]))
+    p.write_text("\n".join(lines) + "\n")
+    return p
+
+
+def read_table(path: str | Path) -> OpenSimTable:
+    """Read a ``.mot``/``.sto`` file (numeric or quaternion columns)."""
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(f"{p}: not a text file ({exc})") from exc
+    lines = text.splitlines()
+    try:
+        end = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader")
+    except StopIteration:
+        raise FileFormatError(
+            f"{p}: no 'endheader' line; is this an OpenSim .mot/.sto file?"
+        ) from None
+    header: dict[str, str] = {}
+    for line in lines[:end]:
+        if "=" in line:
+            key, value = line.split("=", 1)
+            header[key.strip()] = value.strip()
+    if end + 1 >= len(lines):
+        raise FileFormatError(f"{p}: no column labels after 'endheader'")
+    labels = lines[end + 1].split("\t")
+    if labels[0].strip().lower() != "time":
+        raise FileFormatError(f"{p}: first column must be 'time', got {labels[0]!r}")
+    rows = [line.split("\t") for line in lines[end + 2 :] if line.strip()]
+    quat = header.get("DataType", "").lower() == "quaternion" or bool(
+        rows and len(rows[0]) > 1 and "," in rows[0][1]
+    )
+    n, k = len(rows), len(labels) - 1
+    time = np.empty(n)
+    data = np.empty((n, k, 4)) if quat else np.empty((n, k))
+    for i, cells in enumerate(rows):
+        if len(cells) != k + 1:
+            raise FileFormatError(f"{p}: row {i} has {len(cells)} cells, expected {k + 1}")
+        try:
+            time[i] = float(cells[0])
+            if quat:
+                data[i] = [[float(v) for v in c.split(",")] for c in cells[1:]]
+            else:
+                data[i] = [float(c) for c in cells[1:]]
+        except ValueError as exc:
+            raise FileFormatError(f"{p}: row {i}: {exc}") from exc
+    in_deg = header.get("inDegrees", "no").lower() == "yes"
+    return OpenSimTable(
+        time, [s.strip() for s in labels[1:]], data, in_degrees=in_deg, header=header
+    )
