@@ -140,7 +140,7 @@ def _quat(buf: np.ndarray, p: int, out: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def _i16(buf: np.ndarray, p: int) -> int:
+def _i16(buf: np.ndarray, p: int) -> np.int64:
     v = np.int64(buf[p]) | (np.int64(buf[p + 1]) << 8)
     return v - 65536 if v >= 32768 else v
 

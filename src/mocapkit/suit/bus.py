@@ -67,9 +67,9 @@ class InProcessBus(Bus):
         node = self.nodes.get(sensor_id)
         if node is None:
             return None
-        if self.busy_probability and self.rng is not None:
-            if self.rng.random() < self.busy_probability:
-                return None
+        busy = self.busy_probability and self.rng is not None
+        if busy and self.rng is not None and self.rng.random() < self.busy_probability:
+            return None
         return node.answer(t)
 
 

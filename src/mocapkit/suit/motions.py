@@ -137,7 +137,10 @@ def mount(
     p_segment_sensor: object = (0.0, 0.0, 0.0),
     name: str | None = None,
 ) -> PoseSeries:
-    """Pose of a sensor fixed on a segment: ``T_world_sensor = T_world_segment T_segment_sensor``."""
+    """Pose of a sensor fixed on a segment.
+
+    ``T_world_sensor = T_world_segment T_segment_sensor`` (quaternion [w, x, y, z], metres).
+    """
     q_ss = np.asarray(q_segment_sensor, dtype=np.float64)
     p_ss = np.asarray(p_segment_sensor, dtype=np.float64)
     q = quat_mul(segment.quat, q_ss)

@@ -123,7 +123,7 @@ def pack_quat(q: Any) -> bytes:
     return value.to_bytes(6, "little")
 
 
-def unpack_quat(buf: bytes | memoryview, offset: int = 0) -> np.ndarray:
+def unpack_quat(buf: bytes | bytearray | memoryview, offset: int = 0) -> np.ndarray:
     """6 bytes (smallest-three) -> unit quaternion [w, x, y, z] (4,) with the largest >= 0."""
     value = int.from_bytes(buf[offset : offset + 6], "little")
     i = value & 0x3
