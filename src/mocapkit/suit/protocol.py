@@ -16,7 +16,7 @@ Payloads:
 
 - ORIENTATION (6 bytes): ``q_world_sensor`` as smallest-three: the index of the largest
   |component| (2 bits) and the other three, each in [-1/sqrt2, 1/sqrt2] quantised to
-  15 bits, packed into a 48-bit little-endian integer (max angle error ~6e-5 rad).
+  15 bits, packed into a 48-bit little-endian integer (max angle error 1.5e-4 rad).
 - RAW (19 bytes): flags u8 (bit 0 magnetometer present, bit 1 saturated), then int16
   gyr[3] (1e-3 rad/s), acc[3] (5e-3 m/s^2), mag[3] (1e-2 uT).
 - STATUS (6 bytes): battery u16 [mV], temperature i16 [0.01 degC], flags u8, rssi i8 [dBm].

@@ -144,7 +144,8 @@ class RadioLink:
     """A live radio: ``send(packet)`` now, ``deliver(packet)`` called at its arrival time.
 
     A background thread releases packets in arrival order on the real clock
-    (``time.perf_counter``). Call :meth:`close` to stop it (pending packets are flushed).
+    (``time.perf_counter``). :meth:`close` waits for the packets in flight to arrive
+    on time (``drain=True``) or discards them.
     """
 
     def __init__(
@@ -177,14 +178,17 @@ class RadioLink:
                     return
                 due, _, pkt = self._heap[0]
                 wait = due - time.perf_counter()
-                if wait > 0 and not self._closed:
+                if wait > 0:
                     self._cv.wait(timeout=wait)
                     continue
                 heapq.heappop(self._heap)
             self._deliver(pkt)
 
-    def close(self) -> None:
+    def close(self, drain: bool = True) -> None:
+        """Stop the link after the packets in flight arrived (``drain``) or drop them."""
         with self._cv:
             self._closed = True
+            if not drain:
+                self._heap.clear()
             self._cv.notify()
-        self._thread.join(timeout=5.0)
+        self._thread.join(timeout=10.0)
