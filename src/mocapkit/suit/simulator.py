@@ -83,6 +83,7 @@ class SuitSimulator:
         first = next(iter(self.recordings.values()))
         self.time = first.time
         self.rate_hz = first.rate_hz
+        self._timeline: list[tuple[float, bytes]] | None = None
         self.hub = Hub(self.bus, max_id=15, tries=cfg.tries, bundle=cfg.mode == "orientation")
 
     @classmethod
@@ -99,7 +100,12 @@ class SuitSimulator:
         return cls(suit_poses(motion, n_sensors, duration_s, rate_hz), config, rng)
 
     def timeline(self) -> list[tuple[float, bytes]]:
-        """Every frame the hub sends, with its send time [s] (one hub round per tick)."""
+        """Every frame the hub sends, with its send time [s] (one hub round per tick).
+
+        Computed once (the nodes and the hub advance through the motion), then reused.
+        """
+        if self._timeline is not None:
+            return self._timeline
         round_hz = self.config.round_hz or self.rate_hz
         t_end = float(self.time[-1])
         ticks = np.arange(float(self.time[0]), t_end + 0.5 / round_hz, 1.0 / round_hz)
@@ -107,6 +113,7 @@ class SuitSimulator:
         for t in ticks:
             for frame in self.hub.poll_round(float(t) + 1e-9):
                 out.append((float(t), frame))
+        self._timeline = out
         return out
 
     def stream(

@@ -1,0 +1,240 @@
+"""The host receiver: validation counters and log lines, sequencing, sensor events,
+fairness under flooding, consumer API, over real loopback UDP where it matters."""
+
+from __future__ import annotations
+
+import logging
+import socket
+import struct
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from mocapkit.errors import ConfigError
+from mocapkit.suit.protocol import (
+    Kind,
+    crc16,
+    encode_bundle,
+    encode_orientation,
+    encode_raw,
+    encode_status,
+    frame,
+)
+from mocapkit.suit.receiver import Receiver, ReceiverConfig
+from mocapkit.suit.transport import Frame, UdpTransport
+
+
+_OPEN: list[UdpTransport] = []
+
+
+@pytest.fixture(autouse=True)
+def _close_sockets() -> Iterator[None]:
+    yield
+    while _OPEN:
+        _OPEN.pop().close()
+
+
+def _rx(**cfg: object) -> Receiver:
+    """A receiver on a bound socket nobody sends to: tests feed it through ``handle``."""
+    t = UdpTransport.bind("127.0.0.1", 0)
+    _OPEN.append(t)
+    return Receiver(t, ReceiverConfig(**cfg))  # type: ignore[arg-type]
+
+
+def _feed(rx: Receiver, data: bytes, source: object = ("10.0.0.1", 5000), t_ns: int | None = None) -> None:
+    rx.handle(Frame(data, source, time.perf_counter_ns() if t_ns is None else t_ns))
+
+
+def _raw(sid: int, seq: int, t_us: int = 0) -> bytes:
+    return encode_raw(sid, seq, t_us or seq * 1000, [0.1, 0.2, 0.3], [0, 0, 9.81], [20, 0, -40])
+
+
+def _drain(rx: Receiver) -> list:
+    out = []
+    while True:
+        b = rx.get_batch(1000, 0.0)
+        if not b:
+            return out
+        out += b
+
+
+@pytest.mark.parametrize(
+    ("data", "reason", "message"),
+    [
+        (b"\xa5\x12\x02", "truncated", "at least 12"),
+        (_raw(1, 0)[:-3], "truncated", "header declares 31"),
+        (_raw(1, 0) + bytes(400), "oversized", "at most 267"),
+        (_raw(1, 0)[:20] + bytes([_raw(1, 0)[20] ^ 1]) + _raw(1, 0)[21:], "bad_crc", "CRC 0x"),
+        (frame(Kind.RAW, 16, 0, 0, bytes(19)), "unknown_sensor", "sensor_id 16 outside 1..15"),
+    ],
+)
+def test_malformed_datagrams_are_counted_and_logged(data, reason, message, caplog) -> None:  # type: ignore[no-untyped-def]
+    rx = _rx()
+    with caplog.at_level(logging.WARNING, logger="mocapkit.suit.receiver"):
+        _feed(rx, data)
+    assert rx.stats().dropped == {reason: 1}
+    assert any(message in r.message and f"[{reason}]" in r.message for r in caplog.records)
+    assert _drain(rx) == []
+
+
+def test_unsupported_version_is_counted(caplog) -> None:  # type: ignore[no-untyped-def]
+    pkt = bytearray(_raw(1, 0))
+    pkt[1] = (3 << 4) | 2
+    pkt[-2:] = struct.pack("<H", crc16(bytes(pkt[1:-2])))
+    rx = _rx()
+    with caplog.at_level(logging.WARNING):
+        _feed(rx, bytes(pkt))
+    assert rx.stats().dropped == {"bad_version": 1}
+    assert "protocol version 3, this receiver speaks 1" in caplog.text
+
+
+def test_allow_list_rejects_other_ids(caplog) -> None:  # type: ignore[no-untyped-def]
+    rx = _rx(allowed_ids=frozenset({1, 2}))
+    with caplog.at_level(logging.WARNING):
+        _feed(rx, _raw(1, 0))
+        _feed(rx, _raw(7, 0))
+    assert rx.stats().dropped == {"unknown_sensor": 1}
+    assert "sensor_id 7 is not in the allow-list [1, 2]" in caplog.text
+    assert [s.sensor_id for s in _drain(rx)] == [1]
+
+
+def test_log_lines_are_rate_limited(caplog) -> None:  # type: ignore[no-untyped-def]
+    rx = _rx()
+    with caplog.at_level(logging.WARNING):
+        for _ in range(500):
+            _feed(rx, b"\xa5\x00")
+    assert rx.stats().dropped == {"truncated": 500}
+    assert len([r for r in caplog.records if "[truncated]" in r.message]) == 1
+
+
+def test_duplicates_reordering_replay_and_fields() -> None:
+    rx = _rx()
+    for seq in (0, 1, 3, 2, 2, 1, 4):
+        _feed(rx, _raw(5, seq))
+    samples = _drain(rx)
+    assert [s.seq for s in samples] == [0, 1, 2, 3, 4]
+    s = rx.stats().sensors[5]
+    assert (s.delivered, s.duplicate, s.reordered, s.lost) == (5, 2, 1, 0)
+    first = samples[0]
+    assert first.kind is Kind.RAW and first.sensor_id == 5
+    np.testing.assert_allclose(first.gyr, [0.1, 0.2, 0.3])
+    np.testing.assert_allclose(first.mag, [20, 0, -40])
+    assert first.t_sensor_s == pytest.approx(0.0)
+    assert samples[3].t_sensor_s == pytest.approx(0.003)
+
+
+def test_gap_counted_lost_after_window() -> None:
+    rx = _rx(reorder_window_s=0.01)
+    t = time.perf_counter_ns()
+    _feed(rx, _raw(1, 0), t_ns=t)
+    _feed(rx, _raw(1, 5), t_ns=t)
+    assert [s.seq for s in _drain(rx)] == [0]
+    rx._housekeeping(t + 20_000_000)
+    assert [s.seq for s in _drain(rx)] == [5]
+    assert rx.stats().sensors[1].lost == 4
+
+
+def test_bundle_and_status() -> None:
+    rx = _rx()
+    q = np.array([0.5, 0.5, 0.5, 0.5])
+    _feed(rx, encode_bundle(9, 123_000, [(1, q), (2, -q)]))
+    _feed(rx, encode_status(2, 0, 0, 3650, 31.0))
+    samples = _drain(rx)
+    assert [(s.sensor_id, s.seq, s.kind) for s in samples] == [
+        (1, 9, Kind.ORIENTATION),
+        (2, 9, Kind.ORIENTATION),
+    ]
+    assert samples[0].t_sensor_s == pytest.approx(0.123)
+    assert rx.stats().sensors[2].battery_mv == 3650
+
+
+def test_sensor_events_added_missing_back() -> None:
+    rx = _rx(missing_after_s=0.1)
+    t = time.perf_counter_ns()
+    _feed(rx, _raw(3, 0), t_ns=t)
+    rx._housekeeping(t + 200_000_000)
+    assert rx.stats().sensors[3].state == "missing"
+    _feed(rx, _raw(3, 900), t_ns=t + 300_000_000)  # back, with its counter elsewhere
+    assert [(e.kind, e.sensor_id) for e in rx.events()] == [
+        ("added", 3),
+        ("missing", 3),
+        ("back", 3),
+    ]
+    assert [s.seq for s in _drain(rx)] == [0, 900]
+
+
+def test_round_robin_consumer_and_bounded_queues() -> None:
+    rx = _rx(queue_per_sensor=100)
+    for seq in range(300):
+        _feed(rx, _raw(1, seq))
+    for seq in range(5):
+        _feed(rx, _raw(2, seq))
+    batch = rx.get_batch(12, 0.0)
+    # sensor 1 flooded its own queue (oldest dropped) but sensor 2 still gets its turn
+    assert sum(s.sensor_id == 2 for s in batch) == 5
+    st_ = rx.stats()
+    assert st_.sensors[1].queue_dropped == 200 and st_.dropped["queue_full"] == 200
+
+
+def test_listener_is_called() -> None:
+    rx = _rx()
+    seen: list[int] = []
+    rx.add_listener(lambda s: seen.append(s.seq))
+    for seq in range(3):
+        _feed(rx, _raw(1, seq))
+    assert seen == [0, 1, 2]
+
+
+def test_config_validation() -> None:
+    with pytest.raises(ConfigError, match="protocols: expected suit, slimevr or auto"):
+        ReceiverConfig(protocols="tcp")  # type: ignore[arg-type]
+    with pytest.raises(ConfigError, match="reorder_window_s: expected > 0"):
+        ReceiverConfig(reorder_window_s=0)
+    with pytest.raises(ConfigError, match="allowed_ids: expected IDs in 1..15"):
+        ReceiverConfig(allowed_ids=frozenset({0}))
+
+
+@given(st.binary(max_size=120))
+def test_fuzz_receiver_never_raises(data: bytes) -> None:
+    rx = _rx()
+    _feed(rx, data)
+    _feed(rx, b"\xa5" + data)
+    _feed(rx, struct.pack(">IQ", 17, 1) + data)
+    assert rx.stats().datagrams == 3
+
+
+def test_udp_stream_with_a_flooding_sender() -> None:
+    """A flooding source is rate-limited; the legitimate sensors lose nothing."""
+    rx_t = UdpTransport.bind("127.0.0.1", 0)
+    # the good source sends 400 packets, within its burst allowance; the flood sends 5000
+    rx = Receiver(rx_t, ReceiverConfig(source_rate_hz=2000, source_burst=600)).start()
+    good = UdpTransport.connect("127.0.0.1", rx_t.port)
+    flood = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        junk = _raw(3, 0)
+        for i in range(200):
+            good.send(_raw(1, i))
+            good.send(_raw(2, i))
+            for _ in range(25):  # 25 flood datagrams (replays of one packet) per good pair
+                flood.sendto(junk, ("127.0.0.1", rx_t.port))
+            if i % 20 == 0:
+                time.sleep(0.002)
+        got: dict[int, int] = {}
+        deadline = time.monotonic() + 5.0
+        while time.monotonic() < deadline and (got.get(1, 0) < 200 or got.get(2, 0) < 200):
+            for s in rx.get_batch(1000, 0.05):
+                got[s.sensor_id] = got.get(s.sensor_id, 0) + 1
+    finally:
+        rx.stop()
+        good.close()
+        flood.close()
+        rx_t.close()
+    st_ = rx.stats()
+    assert got.get(1) == 200 and got.get(2) == 200
+    assert st_.sensors[1].lost == 0 and st_.sensors[2].lost == 0
+    assert st_.dropped.get("rate_limited", 0) > 0
+    assert st_.sensors[3].duplicate > 0  # the admitted replays were caught as duplicates
