@@ -43,11 +43,15 @@ def test_help_lists_examples(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_bench_prints_exactly_the_five_figures(capsys: pytest.CaptureFixture[str]) -> None:
-    code = main(["suit", "bench", "--sensors", "3", "--rate-hz", "200", "--seconds", "0.3", "--json"])
+    code = main(
+        ["suit", "bench", "--sensors", "3", "--rate-hz", "200", "--seconds", "0.3", "--json"]
+    )
     assert code == 0
     obj = json.loads(capsys.readouterr().out)
     assert list(obj) == ["sent", "received", "lost", "latency_ms_p50", "latency_ms_p99"]
-    assert obj["sent"] == 3 * 61 and obj["lost"] == 0 and obj["received"] == obj["sent"]
+    assert obj["sent"] == 3 * 61
+    assert obj["lost"] == 0
+    assert obj["received"] == obj["sent"]
     assert 0 < obj["latency_ms_p50"] <= obj["latency_ms_p99"]
 
 
@@ -56,7 +60,8 @@ def test_radio_table_matches_docs(capsys: pytest.CaptureFixture[str]) -> None:
     assert capsys.readouterr().out == radio_rate_markdown()
     assert main(["suit", "radio-table", "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)
-    assert rows[-1]["n_sensors"] == 15 and rows[-1]["ratio"] > 2
+    assert rows[-1]["n_sensors"] == 15
+    assert rows[-1]["ratio"] > 2
 
 
 def _run_receiver(argv: list[str], codes: list[int]) -> threading.Thread:
@@ -71,26 +76,66 @@ def test_simulate_record_replay_decode(tmp_path: Path, capsys: pytest.CaptureFix
     rec_a = tmp_path / "a.mcap"
     codes: list[int] = []
     th = _run_receiver(
-        ["suit", "record", "--host", "127.0.0.1", "--port", str(port), "--seconds", "2.0",
-         "--out", str(rec_a), "--json"],
+        [
+            "suit",
+            "record",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--seconds",
+            "2.0",
+            "--out",
+            str(rec_a),
+            "--json",
+        ],
         codes,
     )
-    sim = ["suit", "simulate", "--port", str(port), "--sensors", "3", "--rate-hz", "100",
-           "--seconds", "0.5", "--speed", "0", "--motion", "wave", "--noise", "--json"]
+    sim = [
+        "suit",
+        "simulate",
+        "--port",
+        str(port),
+        "--sensors",
+        "3",
+        "--rate-hz",
+        "100",
+        "--seconds",
+        "0.5",
+        "--speed",
+        "0",
+        "--motion",
+        "wave",
+        "--noise",
+        "--json",
+    ]
     assert main(sim) == 0
     th.join()
     assert codes == [0]
     sent, summary = _objects(capsys.readouterr().out)
     assert sent["frames"] == 3 * 51
-    assert summary["datagrams"] == 153 and summary["dropped"] == {}
+    assert summary["datagrams"] == 153
+    assert summary["dropped"] == {}
     assert set(summary["sensors"]) == {"1", "2", "3"}
-    assert summary["sensors"]["1"]["delivered"] == 51 and summary["recording"]["frames"] == 153
+    assert summary["sensors"]["1"]["delivered"] == 51
+    assert summary["recording"]["frames"] == 153
 
     port2 = _free_port()
     rec_b = tmp_path / "b.mcap"
     th = _run_receiver(
-        ["suit", "receive", "--host", "127.0.0.1", "--port", str(port2), "--seconds", "1.5",
-         "--record", str(rec_b), "--json"],
+        [
+            "suit",
+            "receive",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port2),
+            "--seconds",
+            "1.5",
+            "--record",
+            str(rec_b),
+            "--json",
+        ],
         codes,
     )
     assert main(["suit", "replay", str(rec_a), "--port", str(port2), "--speed", "0", "--json"]) == 0
@@ -100,17 +145,36 @@ def test_simulate_record_replay_decode(tmp_path: Path, capsys: pytest.CaptureFix
 
     assert main(["suit", "decode", str(rec_a), "--json"]) == 0
     dec = json.loads(capsys.readouterr().out)
-    assert dec["samples"] == 153 and dec["samples_per_sensor"] == {"1": 51, "2": 51, "3": 51}
+    assert dec["samples"] == 153
+    assert dec["samples_per_sensor"] == {"1": 51, "2": 51, "3": 51}
 
 
 def test_simulate_through_the_radio_model(capsys: pytest.CaptureFixture[str]) -> None:
     port = _free_port()
-    argv = ["suit", "simulate", "--port", str(port), "--sensors", "2", "--rate-hz", "100",
-            "--seconds", "0.2", "--speed", "0", "--radio", "--radio-bps", "1000000",
-            "--loss", "0.5", "--json"]
+    argv = [
+        "suit",
+        "simulate",
+        "--port",
+        str(port),
+        "--sensors",
+        "2",
+        "--rate-hz",
+        "100",
+        "--seconds",
+        "0.2",
+        "--speed",
+        "0",
+        "--radio",
+        "--radio-bps",
+        "1000000",
+        "--loss",
+        "0.5",
+        "--json",
+    ]
     assert main(argv) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["radio"]["sent"] == 42 and 5 < out["radio"]["lost"] < 37
+    assert out["radio"]["sent"] == 42
+    assert 5 < out["radio"]["lost"] < 37
 
 
 def test_errors_exit_1_with_a_message(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -119,7 +183,12 @@ def test_errors_exit_1_with_a_message(tmp_path: Path, capsys: pytest.CaptureFixt
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-        assert main(["suit", "receive", "--host", "127.0.0.1", "--port", str(port), "--seconds", "0.1"]) == 1
+        assert (
+            main(
+                ["suit", "receive", "--host", "127.0.0.1", "--port", str(port), "--seconds", "0.1"]
+            )
+            == 1
+        )
     assert f"cannot bind UDP 127.0.0.1:{port}" in capsys.readouterr().err
     assert main(["suit", "simulate", "--sensors", "16", "--seconds", "0.1"]) == 1
     assert "n_sensors: expected 1..15, got 16" in capsys.readouterr().err

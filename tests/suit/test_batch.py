@@ -33,7 +33,9 @@ def _mixed_stream(rng: np.random.Generator) -> tuple[bytes, list[bytes]]:
             frames.append(encode_orientation(1 + i % 15, i, i * 1000, q))
         elif choice == 1:
             mag = None if i % 8 == 1 else rng.normal(0, 40, 3)
-            frames.append(encode_raw(1 + i % 15, i, i * 1000, rng.normal(size=3), rng.normal(size=3), mag))
+            frames.append(
+                encode_raw(1 + i % 15, i, i * 1000, rng.normal(size=3), rng.normal(size=3), mag)
+            )
         elif choice == 2:
             frames.append(encode_status(2, i, i, 3700, 25.0))
         else:
@@ -60,7 +62,9 @@ def test_decode_stream_equals_reference() -> None:
             rows.append((p.kind, p.sensor_id, p.seq, p.t_us, p.quat, p))
     assert len(dec) == len(rows)
     for i, (kind, sid, seq, t_us, q, p) in enumerate(rows):
-        assert dec.sensor_id[i] == sid and dec.seq[i] == seq and dec.t_us[i] == t_us
+        assert dec.sensor_id[i] == sid
+        assert dec.seq[i] == seq
+        assert dec.t_us[i] == t_us
         if q is not None:
             np.testing.assert_allclose(dec.quat[i], q, atol=1e-15)  # same arithmetic
         if kind is Kind.RAW:
@@ -88,7 +92,11 @@ def test_batch_encoders_equal_reference() -> None:
     for i in range(len(q)):
         assert packed[i].tobytes() == pack_quat(q[i])
     t = np.arange(50) * 1000 + 2**32 - 10_000
-    gyr, acc, mag = rng.normal(0, 40, (50, 3)), rng.normal(0, 50, (50, 3)), rng.normal(0, 40, (50, 3))
+    gyr, acc, mag = (
+        rng.normal(0, 40, (50, 3)),
+        rng.normal(0, 50, (50, 3)),
+        rng.normal(0, 40, (50, 3)),
+    )
     raw = encode_raw_many(3, 65530, t, gyr, acc, mag)
     raw6 = encode_raw_many(3, 0, t, gyr, acc, None)
     ori = encode_orientation_many(4, 7, t, q)

@@ -84,7 +84,9 @@ def test_hub_bundles_a_round_of_orientations() -> None:
     frames = hub.poll_round(0.25)
     assert len(frames) == 1
     b = decode(frames[0])
-    assert b.kind is Kind.BUNDLE and b.seq == 0 and b.t_us == 250_500
+    assert b.kind is Kind.BUNDLE
+    assert b.seq == 0
+    assert b.t_us == 250_500
     assert [sid for sid, _ in b.entries] == [1, 3, 7]
     for sid, q in b.entries:
         ref = np.array([1.0, 0.1 * sid, 0, 0]) / np.linalg.norm([1.0, 0.1 * sid])
@@ -137,7 +139,9 @@ def test_motions_and_mounting() -> None:
 
 
 def test_raw_simulator_timeline() -> None:
-    sim = SuitSimulator.from_motion("walk", 15, 0.5, 200.0, SuitSimConfig(), np.random.default_rng(0))
+    sim = SuitSimulator.from_motion(
+        "walk", 15, 0.5, 200.0, SuitSimConfig(), np.random.default_rng(0)
+    )
     frames = [f for _, f in sim.timeline()]
     assert len(frames) == 15 * 101
     assert sim.timeline() is sim.timeline()
@@ -148,7 +152,9 @@ def test_on_node_fusion_tracks_the_true_orientation(name: str) -> None:
     if name == "<none registered>":
         pytest.skip("no orientation filter registered yet (the imu part lands them)")
     poses = suit_poses("wave", 3, 3.0, 100.0)
-    sim = SuitSimulator(poses, SuitSimConfig(mode="orientation", filter_name=name), np.random.default_rng(0))
+    sim = SuitSimulator(
+        poses, SuitSimConfig(mode="orientation", filter_name=name), np.random.default_rng(0)
+    )
     timeline = sim.timeline()
     assert all(decode(f).kind is Kind.BUNDLE for _, f in timeline)
     last = decode(timeline[-1][1])

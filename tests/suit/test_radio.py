@@ -40,7 +40,9 @@ def test_docs_table_is_generated_from_code() -> None:
 
 
 def test_serialisation_spaces_packets_by_bandwidth() -> None:
-    model = RadioModel(RadioParams(bps=10_000, latency_s=0.0, queue_bytes=10_000), np.random.default_rng(0))
+    model = RadioModel(
+        RadioParams(bps=10_000, latency_s=0.0, queue_bytes=10_000), np.random.default_rng(0)
+    )
     times = [model.deliver_time(0.0, 100) for _ in range(3)]
     # 100 bytes x 10 bits / 10 kbit/s = 0.1 s each, back to back
     assert times == pytest.approx([0.1, 0.2, 0.3])
@@ -50,8 +52,12 @@ def test_overflow_loss_and_reorder_counts() -> None:
     p = RadioParams(bps=10_000, latency_s=0.0, queue_bytes=250)
     model = RadioModel(p, np.random.default_rng(0))
     out = [model.deliver_time(0.0, 100) for _ in range(4)]
-    assert out[2] is None and out[3] is None and model.counts["overflow"] == 2
-    lossy = RadioModel(RadioParams(loss=0.3, reorder=0.2, queue_bytes=10**9), np.random.default_rng(5))
+    assert out[2] is None
+    assert out[3] is None
+    assert model.counts["overflow"] == 2
+    lossy = RadioModel(
+        RadioParams(loss=0.3, reorder=0.2, queue_bytes=10**9), np.random.default_rng(5)
+    )
     res = [lossy.deliver_time(i * 1.0, 18) for i in range(2000)]
     lost = sum(r is None for r in res)
     # binomial(2000, 0.3): sd ~ 20, so +-5 sd

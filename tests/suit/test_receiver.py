@@ -19,14 +19,12 @@ from mocapkit.suit.protocol import (
     Kind,
     crc16,
     encode_bundle,
-    encode_orientation,
     encode_raw,
     encode_status,
     frame,
 )
 from mocapkit.suit.receiver import Receiver, ReceiverConfig
 from mocapkit.suit.transport import Frame, UdpTransport
-
 
 _OPEN: list[UdpTransport] = []
 
@@ -45,7 +43,9 @@ def _rx(**cfg: object) -> Receiver:
     return Receiver(t, ReceiverConfig(**cfg))  # type: ignore[arg-type]
 
 
-def _feed(rx: Receiver, data: bytes, source: object = ("10.0.0.1", 5000), t_ns: int | None = None) -> None:
+def _feed(
+    rx: Receiver, data: bytes, source: object = ("10.0.0.1", 5000), t_ns: int | None = None
+) -> None:
     rx.handle(Frame(data, source, time.perf_counter_ns() if t_ns is None else t_ns))
 
 
@@ -120,7 +120,8 @@ def test_duplicates_reordering_replay_and_fields() -> None:
     s = rx.stats().sensors[5]
     assert (s.delivered, s.duplicate, s.reordered, s.lost) == (5, 2, 1, 0)
     first = samples[0]
-    assert first.kind is Kind.RAW and first.sensor_id == 5
+    assert first.kind is Kind.RAW
+    assert first.sensor_id == 5
     np.testing.assert_allclose(first.gyr, [0.1, 0.2, 0.3])
     np.testing.assert_allclose(first.mag, [20, 0, -40])
     assert first.t_sensor_s == pytest.approx(0.0)
@@ -177,7 +178,8 @@ def test_round_robin_consumer_and_bounded_queues() -> None:
     # sensor 1 flooded its own queue (oldest dropped) but sensor 2 still gets its turn
     assert sum(s.sensor_id == 2 for s in batch) == 5
     st_ = rx.stats()
-    assert st_.sensors[1].queue_dropped == 200 and st_.dropped["queue_full"] == 200
+    assert st_.sensors[1].queue_dropped == 200
+    assert st_.dropped["queue_full"] == 200
 
 
 def test_listener_is_called() -> None:
@@ -234,7 +236,9 @@ def test_udp_stream_with_a_flooding_sender() -> None:
         flood.close()
         rx_t.close()
     st_ = rx.stats()
-    assert got.get(1) == 200 and got.get(2) == 200
-    assert st_.sensors[1].lost == 0 and st_.sensors[2].lost == 0
+    assert got.get(1) == 200
+    assert got.get(2) == 200
+    assert st_.sensors[1].lost == 0
+    assert st_.sensors[2].lost == 0
     assert st_.dropped.get("rate_limited", 0) > 0
     assert st_.sensors[3].duplicate > 0  # the admitted replays were caught as duplicates

@@ -68,9 +68,11 @@ def test_record_then_replay_is_bit_for_bit(tmp_path: Path) -> None:
     samples = read_samples(a)
     assert len(samples) == len(sent)
     assert set(samples[0]) == set(SAMPLE_SCHEMA["properties"])  # type: ignore[arg-type]
-    assert samples[0]["kind"] == "RAW" and len(samples[0]["gyr"]) == 3
+    assert samples[0]["kind"] == "RAW"
+    assert len(samples[0]["gyr"]) == 3
     dec = decode_recording(a)
-    assert len(dec) == len(sent) and dec.n_frames == len(sent)
+    assert len(dec) == len(sent)
+    assert dec.n_frames == len(sent)
     np.testing.assert_array_equal(np.sort(np.unique(dec.sensor_id)), [1, 2, 3, 4])
 
 
@@ -86,12 +88,15 @@ def test_mcap_layout_opens_as_foxglove_expects(tmp_path: Path) -> None:
     topics = {c.topic: c for c in summary.channels.values()}
     assert topics[PACKETS_TOPIC].metadata == {"source": "('127.0.0.1', 5)"}
     schema = summary.schemas[topics["/suit/samples"].schema_id]
-    assert schema.encoding == "jsonschema" and topics["/suit/samples"].message_encoding == "json"
+    assert schema.encoding == "jsonschema"
+    assert topics["/suit/samples"].message_encoding == "json"
     assert json.loads(schema.data)["title"] == "mocapkit.suit.Sample"
 
 
 def test_replay_transport_feeds_a_receiver(tmp_path: Path) -> None:
-    sim = SuitSimulator.from_motion("static", 2, 0.2, 50.0, SuitSimConfig(), np.random.default_rng(1))
+    sim = SuitSimulator.from_motion(
+        "static", 2, 0.2, 50.0, SuitSimConfig(), np.random.default_rng(1)
+    )
     path = tmp_path / "s.mcap"
     _, n = _record(path, lambda send: sim.stream(send, speed=0))
     t = ReplayTransport(path, speed=0)
@@ -101,7 +106,8 @@ def test_replay_transport_feeds_a_receiver(tmp_path: Path) -> None:
     while len(got) < n and time.monotonic() < deadline:
         got += rx.get_batch(100, 0.05)
     rx.stop()
-    assert len(got) == n and t.finished
+    assert len(got) == n
+    assert t.finished
 
 
 def test_replay_paces_at_the_requested_speed(tmp_path: Path) -> None:
@@ -125,3 +131,25 @@ def test_bad_recording_files(tmp_path: Path) -> None:
     junk.write_bytes(b"this is not mcap" * 10)
     with pytest.raises(FileFormatError, match="not a readable MCAP recording"):
         read_frames(junk)
+
+
+def test_fast_frame_reader_equals_the_mcap_reader(tmp_path: Path) -> None:
+    from mocapkit.suit.mcap_fast import read_frame_buffer
+
+    path = tmp_path / "f.mcap"
+    t0 = time.perf_counter_ns()
+    rng = np.random.default_rng(0)
+    frames = [
+        bytes(rng.integers(0, 256, int(rng.integers(1, 60)), dtype=np.uint8)) for _ in range(3000)
+    ]
+    with McapRecorder(path) as rec:
+        for i, f in enumerate(frames):
+            # two sources (two channels); equal times keep their arrival order
+            rec.write_frame(f, t0 + (i // 3) * 1000, ("a", i % 2))
+    ref = read_frames(path)
+    fb = read_frame_buffer(path)
+    assert len(fb) == len(ref) == len(frames)
+    assert [fb.frame(i) for i in range(len(fb))] == [r.data for r in ref] == frames
+    np.testing.assert_array_equal(fb.log_time_ns, [r.log_time_ns for r in ref])
+    with pytest.raises(FileNotFoundError):
+        read_frame_buffer(tmp_path / "nope.mcap")

@@ -3,6 +3,7 @@ tracker talking to the receiver over loopback UDP (handshake answered as the ser
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import struct
 import time
@@ -43,14 +44,19 @@ def _handshake_bytes() -> bytes:
 def test_handshake_byte_by_byte() -> None:
     (m,) = parse(_handshake_bytes())
     assert (m.type, m.board, m.imu, m.mcu, m.firmware_build) == (3, 4, 8, 2, 19)
-    assert m.firmware == "0.5.3" and m.mac == "3C:71:BF:00:11:22"
+    assert m.firmware == "0.5.3"
+    assert m.mac == "3C:71:BF:00:11:22"
     (old,) = parse(_header(3, 0) + (4).to_bytes(4, "big"))  # old firmware: short handshake
-    assert old.type == 3 and old.board is None
+    assert old.type == 3
+    assert old.board is None
 
 
 def test_handshake_reply_layout() -> None:
     r = handshake_reply()
-    assert len(r) == 64 and r[0] == 3 and r[1:13] == b"Hey OVR =D 5" and not any(r[13:])
+    assert len(r) == 64
+    assert r[0] == 3
+    assert r[1:13] == b"Hey OVR =D 5"
+    assert not any(r[13:])
 
 
 def test_rotation_data_byte_by_byte() -> None:
@@ -80,13 +86,16 @@ def test_legacy_rotation_accel_battery_sensor_info() -> None:
     assert rot.sensor_id == 0
     np.testing.assert_allclose(rot.quat, Q, atol=1e-7)
     (acc,) = parse(_header(4, 2) + struct.pack(">3f", 0.1, 0.2, 9.7) + bytes([1]))
-    assert acc.sensor_id == 1 and acc.acc is not None
+    assert acc.sensor_id == 1
+    assert acc.acc is not None
     (bat,) = parse(_header(12, 3) + struct.pack(">2f", 3.9, 0.8))
-    assert bat.battery_v == pytest.approx(3.9) and bat.battery_level == pytest.approx(0.8)
+    assert bat.battery_v == pytest.approx(3.9)
+    assert bat.battery_level == pytest.approx(0.8)
     (info,) = parse(_header(15, 4) + bytes([1, 1, 8]))
     assert (info.sensor_id, info.status) == (1, 1)
     (hb,) = parse(_header(0, 5))
-    assert hb.type == 0 and hb.quat is None
+    assert hb.type == 0
+    assert hb.quat is None
 
 
 def test_bundles_v1_and_v2_byte_by_byte() -> None:
@@ -127,10 +136,8 @@ def test_malformed_slimevr(data: bytes, message: str) -> None:
 @given(st.binary(max_size=200))
 def test_fuzz_parse_raises_only_its_error(data: bytes) -> None:
     for d in (data, _header(100, 1) + data, _header(101, 1) + data, _header(23, 1) + data):
-        try:
+        with contextlib.suppress(SlimeVRError):
             parse(d)
-        except SlimeVRError:
-            pass
 
 
 def test_tracker_over_udp() -> None:

@@ -15,7 +15,8 @@ def test_in_order_delivery_is_immediate() -> None:
     for s in range(5):
         got += _seqs(tr.push(s + 100, s, 0.0))
     assert got == [100, 101, 102, 103, 104]
-    assert tr.counts.delivered == 5 and tr.counts.lost == 0
+    assert tr.counts.delivered == 5
+    assert tr.counts.lost == 0
 
 
 def test_reorder_within_window_and_duplicates() -> None:

@@ -181,8 +181,11 @@ def read_samples(path: str | Path) -> list[dict[str, Any]]:
 
 
 def decode_recording(path: str | Path) -> DecodedStream:
-    """Batch-decode every frame of a recording (numba; see :mod:`mocapkit.suit.batch`)."""
-    return decode_stream(b"".join(f.data for f in read_frames(path)))
+    """Batch-decode every frame of a recording: the fast chunk reader
+    (:mod:`mocapkit.suit.mcap_fast`) then the numba stream decoder."""
+    from mocapkit.suit.mcap_fast import read_frame_buffer
+
+    return decode_stream(read_frame_buffer(path).data)
 
 
 def paced(
