@@ -20,8 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.suit.batch import decode_stream
-from mocapkit.suit.protocol import decode
 from mocapkit.suit.mcap_fast import read_frame_buffer
+from mocapkit.suit.protocol import decode
 from mocapkit.suit.recording import McapRecorder, decode_recording, read_frames
 from mocapkit.suit.simulator import SuitSimConfig, SuitSimulator
 

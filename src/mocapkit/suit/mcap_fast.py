@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -66,7 +67,7 @@ def _scan_messages(
                 log_time[m] = _u64(buf, body + 6)
                 seq[m] = s
                 m += 1
-        p = body + rec_len
+        p = body + int(rec_len)
     return start[:m], length[:m], log_time[:m], seq[:m], ok
 
 
@@ -132,7 +133,7 @@ def _chunk_records(record: bytes) -> bytes:
     return record[p : p + size]
 
 
-def _scan_chunk(raw: bytes, wanted: np.ndarray, parts: list, path: Path) -> None:  # type: ignore[type-arg]
+def _scan_chunk(raw: bytes, wanted: np.ndarray, parts: list[Any], path: Path) -> None:
     buf = np.frombuffer(raw, dtype=np.uint8)
     start, length, t, seq, ok = _scan_messages(buf, wanted)
     if not ok:
@@ -208,5 +209,5 @@ def read_frame_buffer(path: str | Path, topic: str = "/suit/packets") -> FrameBu
     ends = np.append(starts[1:], base)
     lengths = ends - starts
     starts, lengths = starts[order], lengths[order]
-    data = np.concatenate([out[s : s + n] for s, n in zip(starts, lengths, strict=True)])
-    return FrameBuffer(data, np.concatenate([[0], np.cumsum(lengths)]), log_time[order])
+    joined = np.concatenate([out[s : s + n] for s, n in zip(starts, lengths, strict=True)])
+    return FrameBuffer(joined, np.concatenate([[0], np.cumsum(lengths)]), log_time[order])
