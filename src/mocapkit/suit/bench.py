@@ -55,7 +55,7 @@ def run_loopback_bench(
 
     def consume() -> None:
         nonlocal received
-        while not (done.is_set() and not rx._rr):
+        while not (done.is_set() and rx.pending == 0):
             for s in rx.get_batch(4096, 0.05):
                 i = index.get((s.sensor_id, s.seq & 0xFFFF))
                 if i is not None and arrival_ns[i] == 0:

@@ -135,8 +135,9 @@ class Receiver:
         self._buckets: dict[Any, list[float]] = {}
         self._events: deque[SensorEvent] = deque(maxlen=1024)
         self._listeners: list[Callable[[SuitSample], None]] = []
-        self._cv = threading.Condition()
-        self._rr: deque[int] = deque()
+        self._cv = threading.Condition()  # guards the per-sensor queues and _ready
+        self._ready = 0  # samples queued over all sensors
+        self._rr_next = 0  # round-robin: the sensor ID to serve first next time
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._log_last: dict[str, float] = {}
@@ -234,7 +235,8 @@ class Receiver:
             )
         s = self._sensors.get(sensor_id)
         if s is None:
-            s = self._sensors[sensor_id] = _Sensor(sensor_id, self.cfg)
+            with self._cv:
+                s = self._sensors[sensor_id] = _Sensor(sensor_id, self.cfg)
             self._events.append(SensorEvent("added", sensor_id, now_ns))
             log.info("suit: sensor %d added", sensor_id)
         elif s.stats.state == "missing":
@@ -312,13 +314,19 @@ class Receiver:
 
     def _deliver(self, s: _Sensor, sample: SuitSample) -> None:
         st = s.stats
-        if len(s.queue) >= self.cfg.queue_per_sensor:
-            s.queue.popleft()
+        with self._cv:
+            full = len(s.queue) >= self.cfg.queue_per_sensor
+            if full:
+                s.queue.popleft()
+            else:
+                self._ready += 1
+            s.queue.append(sample)
+            self._cv.notify()
+        if full:
             st.queue_dropped += 1
             self._drop(
                 "queue_full", f"sensor {st.sensor_id}: consumer too slow, oldest sample dropped"
             )
-        s.queue.append(sample)
         if math.isfinite(sample.t_sensor_s):
             offset = sample.t_arrival_ns * 1e-9 - sample.t_sensor_s
             if offset < s.offset_min:
@@ -333,9 +341,6 @@ class Receiver:
             fn(sample)
         if self.recorder is not None and self.cfg.record_samples:
             self.recorder.write_sample(sample)
-        with self._cv:
-            self._rr.append(st.sensor_id)
-            self._cv.notify()
 
     def _housekeeping(self, now_ns: int) -> None:
         now = now_ns * 1e-9
@@ -381,30 +386,35 @@ class Receiver:
         """Call ``callback(sample)`` on the receiver thread for every delivered sample."""
         self._listeners.append(callback)
 
+    @property
+    def pending(self) -> int:
+        """Samples queued and not yet taken by the consumer."""
+        return self._ready
+
     def get_batch(self, max_items: int = 1024, timeout_s: float | None = 0.1) -> list[SuitSample]:
-        """Up to ``max_items`` samples, round-robin over sensors; waits up to ``timeout_s``
-        for the first (None: until one arrives or the receiver stops)."""
+        """Up to ``max_items`` samples, round-robin over sensors (one from each in turn);
+        waits up to ``timeout_s`` for the first (None: until one arrives or the receiver
+        stops)."""
         out: list[SuitSample] = []
         with self._cv:
-            if not self._rr:
+            if not self._ready:
                 if self._stop.is_set():
                     return out
-                self._cv.wait_for(lambda: bool(self._rr) or self._stop.is_set(), timeout_s)
-            order = list(dict.fromkeys(self._rr))
-            while len(out) < max_items and order:
-                for sid in list(order):
-                    q = self._sensors[sid].queue
+                self._cv.wait_for(lambda: self._ready > 0 or self._stop.is_set(), timeout_s)
+            if not self._ready:
+                return out
+            ids = sorted(self._sensors)
+            k = next((i for i, sid in enumerate(ids) if sid >= self._rr_next), 0)
+            queues = [self._sensors[sid].queue for sid in ids[k:] + ids[:k]]
+            while len(out) < max_items and self._ready:
+                for q in queues:
                     if q:
                         out.append(q.popleft())
+                        self._ready -= 1
                         if len(out) >= max_items:
                             break
-                    else:
-                        order.remove(sid)
-            taken = len(out)
-            for _ in range(min(taken, len(self._rr))):
-                self._rr.popleft()
-            if taken and not any(s.queue for s in self._sensors.values()):
-                self._rr.clear()
+            if out:
+                self._rr_next = out[-1].sensor_id + 1
         return out
 
     def samples(self, timeout_s: float | None = None) -> Iterator[SuitSample]:
