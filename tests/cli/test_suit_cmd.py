@@ -12,6 +12,7 @@ from typing import Any
 import pytest
 
 from mocapkit.cli.main import main
+from mocapkit.imu.filters import available_filters
 from mocapkit.suit.radio import radio_rate_markdown
 from mocapkit.suit.recording import read_frames
 
@@ -192,3 +193,19 @@ def test_errors_exit_1_with_a_message(tmp_path: Path, capsys: pytest.CaptureFixt
     assert f"cannot bind UDP 127.0.0.1:{port}" in capsys.readouterr().err
     assert main(["suit", "simulate", "--sensors", "16", "--seconds", "0.1"]) == 1
     assert "n_sensors: expected 1..15, got 16" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", available_filters()[:1] or ["<none registered>"])
+def test_simulate_on_node_fusion_over_the_paper_radio(
+    name: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    if name == "<none registered>":
+        pytest.skip("no orientation filter registered yet (the imu part lands them)")
+    argv = ["suit", "simulate", "--port", str(_free_port()), "--mode", "orientation",
+            "--filter", name, "--sensors", "15", "--rate-hz", "100", "--seconds", "0.5",
+            "--radio", "--json"]  # fmt: skip
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    # the hub polls at 95 % of the radio's rate for 15 sensors (28.7 Hz): nothing overflows
+    assert out["radio"]["overflow"] == 0
+    assert out["frames"] == out["radio"]["sent"] > 10

@@ -56,6 +56,12 @@ def register(sub: Any) -> None:
     s.add_argument("--filter", default="miller", help="on-node filter (orientation mode)")
     s.add_argument("--noise", action="store_true", help="consumer-grade IMU errors")
     s.add_argument("--speed", type=float, default=1.0, help="1 real time, 0 as fast as possible")
+    s.add_argument(
+        "--round-hz",
+        type=float,
+        help="hub polling rounds per second (default: the sampling rate; with --radio in "
+        "orientation mode, 95%% of the radio's highest rate)",
+    )
     s.add_argument("--radio", action="store_true", help="send through the paper's radio model")
     s.add_argument("--radio-bps", type=float, default=33_600.0)
     s.add_argument("--loss", type=float, default=0.0, help="radio packet loss probability")
@@ -122,14 +128,18 @@ def _simulate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from mocapkit.imu.simulate import ImuErrorModel
-    from mocapkit.suit.radio import RadioLink, RadioParams
+    from mocapkit.suit.radio import RadioLink, RadioParams, ours_round_bytes, update_rate_hz
     from mocapkit.suit.simulator import SuitSimConfig, SuitSimulator
     from mocapkit.suit.transport import SerialTransport, Transport, UdpTransport
 
+    round_hz = args.round_hz
+    if round_hz is None and args.radio and args.mode == "orientation":
+        round_hz = 0.95 * update_rate_hz(ours_round_bytes(args.sensors), args.radio_bps)
     cfg = SuitSimConfig(
         mode=args.mode,
         filter_name=args.filter,
         errors=ImuErrorModel.consumer_grade() if args.noise else None,
+        round_hz=round_hz,
     )
     rng = np.random.default_rng(args.seed)
     sim = SuitSimulator.from_motion(args.motion, args.sensors, args.seconds, args.rate_hz, cfg, rng)
@@ -163,6 +173,13 @@ def _simulate(args: argparse.Namespace) -> int:
     }
     if link is not None:
         summary["radio"] = dict(link.model.counts)
+        if link.model.counts["overflow"]:
+            print(
+                f"suit: the radio dropped {link.model.counts['overflow']} of "
+                f"{link.model.counts['sent']} frames (transmit buffer full): lower --round-hz "
+                "or --rate-hz, or raise --radio-bps",
+                file=sys.stderr,
+            )
     if args.json:
         print_json(summary)
     else:
