@@ -67,3 +67,13 @@ def test_restart_after_consecutive_old_sequence_numbers() -> None:
     assert tr.counts.restarts == 1
     assert tr.counts.stale == 4
     assert out == [4, 5]
+
+
+def test_large_gap_flushes_buffered_runs_in_order() -> None:
+    tr = SensorTrack(max_gap=10)
+    tr.push(0, 0, 0.0)
+    for s in (3, 4, 5, 8):  # buffered, with holes at 1-2 and 6-7
+        assert tr.push(s, s, 0.0) == []
+    assert _seqs(tr.push(100, 100, 0.0)) == [3, 4, 5, 8, 100]
+    assert tr.counts.lost == 2 + 2 + 91
+    assert tr.pending == {}

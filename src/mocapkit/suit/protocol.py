@@ -91,6 +91,10 @@ _FIXED_PAYLOAD = {
     Kind.RAW: RAW_PAYLOAD,
     Kind.STATUS: STATUS_PAYLOAD,
 }
+# plain-int lookups on the hot path (an IntEnum call costs a microsecond)
+_KINDS = {int(k): k for k in Kind}
+_FIXED_BY_CODE = {int(k): n for k, n in _FIXED_PAYLOAD.items()}
+_RAW_SCALE = np.repeat([GYR_LSB, ACC_LSB, MAG_LSB], 3)
 
 
 def crc16(data: bytes | bytearray | memoryview, init: int = CRC_INIT) -> int:
@@ -276,11 +280,10 @@ def decode(buf: bytes | bytearray | memoryview, max_sensor_id: int = MAX_SENSOR_
     if version != VERSION:
         raise UnsupportedVersionError(f"protocol version {version}, this receiver speaks {VERSION}")
     kind_code = verkind & 0x0F
-    try:
-        kind = Kind(kind_code)
-    except ValueError:
-        raise UnknownKindError(f"payload kind {kind_code} is not defined in version 1") from None
-    need = _FIXED_PAYLOAD.get(kind)
+    kind = _KINDS.get(kind_code)
+    if kind is None:
+        raise UnknownKindError(f"payload kind {kind_code} is not defined in version 1")
+    need = _FIXED_BY_CODE.get(kind_code)
     if need is not None and plen != need:
         raise UnknownKindError(f"{kind.name} payload of {plen} bytes, expected {need}")
     if kind is Kind.BUNDLE:
@@ -296,11 +299,12 @@ def decode(buf: bytes | bytearray | memoryview, max_sensor_id: int = MAX_SENSOR_
     if kind is Kind.ORIENTATION:
         pkt.quat = unpack_quat(buf, p)
     elif kind is Kind.RAW:
-        flags, *v = _RAW.unpack_from(buf, p)
-        pkt.gyr = np.array(v[0:3], dtype=np.float64) * GYR_LSB
-        pkt.acc = np.array(v[3:6], dtype=np.float64) * ACC_LSB
+        flags = buf[p]
+        v = np.frombuffer(buf, dtype="<i2", count=9, offset=p + 1) * _RAW_SCALE
+        pkt.gyr = v[0:3]
+        pkt.acc = v[3:6]
         if flags & RAW_FLAG_MAG:
-            pkt.mag = np.array(v[6:9], dtype=np.float64) * MAG_LSB
+            pkt.mag = v[6:9]
         pkt.saturated = bool(flags & RAW_FLAG_SATURATED)
     elif kind is Kind.STATUS:
         bat, temp, sflags, rssi = _STATUS.unpack_from(buf, p)

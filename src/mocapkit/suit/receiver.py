@@ -182,7 +182,15 @@ class Receiver:
                 time.sleep(0.01)
                 continue
             for frame in frames:
-                self.handle(frame)
+                try:
+                    self.handle(frame)
+                except Exception:  # a bug must cost one datagram, not the receiver
+                    self._stats.dropped["internal_error"] = (
+                        self._stats.dropped.get("internal_error", 0) + 1
+                    )
+                    log.exception(
+                        "suit receiver: internal error on a %d-byte datagram", len(frame.data)
+                    )
             self._housekeeping(time.perf_counter_ns())
 
     # -- per frame ------------------------------------------------------------------------

@@ -121,14 +121,20 @@ class SensorTrack:
         return out
 
     def _skip_to(self, seq: int, out: list[tuple[int, Any]]) -> None:
-        """Give up on everything before ``seq``: flush the buffered items in order."""
+        """Give up on everything before ``seq``: deliver the buffered items in order,
+        counting the holes as lost."""
         assert self.expected is not None
-        for s in sorted(k for k in self.pending if k < seq):
-            self.counts.lost += s - self.expected
-            _, it = self.pending.pop(s)
-            self._deliver_from(s, it, out)
-        self.counts.lost += seq - self.expected
-        self.expected = seq
+        while True:
+            earlier = [k for k in self.pending if k < seq]
+            if not earlier:
+                break
+            first = min(earlier)
+            self.counts.lost += first - self.expected
+            _, it = self.pending.pop(first)
+            self._deliver_from(first, it, out)  # also takes any consecutive successors
+        if seq > self.expected:
+            self.counts.lost += seq - self.expected
+            self.expected = seq
 
     def flush(self, now_s: float) -> list[tuple[int, Any]]:
         """Release buffered items whose wait exceeded the reorder window (gaps -> lost)."""
