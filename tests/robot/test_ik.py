@@ -18,7 +18,8 @@ def test_reaches_nearby_targets_within_limits():
         assert res.reached, res
         assert arm.within_limits(res.q).all()
         # the solver's own tolerances (1e-5 m, 1e-4 rad) times its reporting margin of 10
-        assert res.pos_err_m < 1e-4 and res.rot_err_rad < 1e-3
+        assert res.pos_err_m < 1e-4
+        assert res.rot_err_rad < 1e-3
 
 
 def test_unreachable_target_returns_closest_pose():

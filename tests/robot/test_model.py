@@ -78,7 +78,9 @@ def test_bad_inputs_name_the_argument():
     with pytest.raises(ConfigError, match="q_ref: outside the joint limits"):
         robonaut2_arm("right", q_ref=np.zeros(7))
     msg = arm.describe_limit_violation(np.array([0, 0, 0, 0.5, 0, 0, 0.0]))
-    assert msg is not None and "r2/right_arm/joint2" in msg and "joint3" in msg
+    assert msg is not None
+    assert "r2/right_arm/joint2" in msg
+    assert "joint3" in msg
 
 
 def test_pose_helpers_round_trip():

@@ -146,7 +146,8 @@ def test_map_clips_nan_passes_and_reports():
     arm = rmap.build_arm()
     vals = np.radians([[0, 0, 0, -30, 90, 0, 0], [np.nan] * 7])  # elbow hyper-extended
     out, clipped = rmap.apply(_series(vals, HUMAN), arm)
-    assert clipped[0, 3] and out.values[0, 3] == 0.0
+    assert clipped[0, 3]
+    assert out.values[0, 3] == 0.0
     assert np.isnan(out.values[1]).all()
 
 
@@ -221,7 +222,8 @@ def test_second_robot_from_a_pypi_urdf():
 
     rmap = packaged_map("talos-right")
     arm = rmap.build_arm()
-    assert arm.n == 7 and arm.name == "talos-right"
+    assert arm.n == 7
+    assert arm.name == "talos-right"
     out, _ = rmap.apply(_series(np.radians([20, -10, 5, 60, 90, 0, 0]), HUMAN), arm)
     q = out.values[0]
     assert arm.within_limits(q).all()

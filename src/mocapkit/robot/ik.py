@@ -171,11 +171,11 @@ def solve_ik(
     q = arm.q_ref.copy() if q0 is None else arm.clamp(arm.check_q(q0, "q0"))
     w = np.array([1.0, 1.0, 1.0, p.rot_weight_m, p.rot_weight_m, p.rot_weight_m])
     best_q, best_cost = q, np.inf
-    frozen: list[int] = []
-    it = 0
+    iterations = 0
     stall = 0
     for it in range(1, p.max_iters + 1):
-        q_new, e, frozen = ik_step(arm, q, T_target, p)
+        iterations = it
+        q_new, e, _frozen = ik_step(arm, q, T_target, p)
         cost = float(np.linalg.norm(w * e))
         if cost < best_cost - 1e-9:
             best_q, best_cost, stall = q, cost, 0
@@ -195,4 +195,4 @@ def solve_ik(
         for i in range(arm.n)
         if best_q[i] <= arm.lower[i] + 1e-6 or best_q[i] >= arm.upper[i] - 1e-6
     )
-    return IkResult(best_q, reached, pos, rot, it, at_limit)
+    return IkResult(best_q, reached, pos, rot, iterations, at_limit)
