@@ -237,3 +237,18 @@ def test_second_robot_from_a_pypi_urdf():
     res = solve_ik(arm, arm.fk(q), arm.q_ref)
     assert res.reached
     assert robot_arm("talos-right").n == 7
+
+
+def test_matrix_euler_matches_the_geometry_module():
+    """The per-frame XYX decomposition on matrices equals geometry.euler_from_quat."""
+    from mocapkit.geometry import euler_from_quat, quat_from_euler
+    from mocapkit.robot.segment_retarget import _euler_xyx
+
+    rng = np.random.default_rng(5)
+    qs = [quat_normalize(rng.normal(size=4)) for _ in range(200)]
+    qs += [quat_from_euler([0.7, b, 0.0], "XYX") for b in (0.0, np.pi)]  # gimbal lock
+    for q in qs:
+        got = _euler_xyx(quat_to_matrix(q))
+        want = euler_from_quat(q, "XYX")
+        # angles compared modulo 2 pi; 1e-9 rad: both are closed forms in double precision
+        np.testing.assert_allclose(np.angle(np.exp(1j * (got - want))), 0.0, atol=1e-9)

@@ -28,6 +28,7 @@ limits and the clipped joints are reported.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -36,7 +37,7 @@ import numpy as np
 
 from mocapkit._validate import FloatArray
 from mocapkit.errors import ConfigError, DataError
-from mocapkit.geometry import euler_from_quat, quat_from_matrix, quat_to_matrix
+from mocapkit.geometry import quat_to_matrix
 from mocapkit.robot.model import ArmModel
 
 # Consecutive joint axes must be perpendicular within this cosine (0.06 deg): URDF
@@ -83,8 +84,22 @@ class _Prepared:
     psi: float  # a3 = Rot(a2, psi) a1
     virtual_third: bool
     R_local_init: FloatArray  # robot's local rotation of the group at q_init
+    R_psi: FloatArray  # Rot(a2, psi)
     child_frame: str
     parent_frame: str | None
+
+
+def _euler_xyx(R: FloatArray) -> FloatArray:
+    """Intrinsic X-Y-X angles (a, b, c), b in [0, pi], of R = Rx(a) Ry(b) Rx(c) (the
+    textbook matrix form: R00 = cos b, (R10, R20) = sin b (sin a, -cos a),
+    (R01, R02) = sin b (sin c, cos c)). At b = 0 or pi, c = 0 (the geometry module's
+    gimbal rule)."""
+    sb = math.hypot(R[1, 0], R[2, 0])
+    b = math.atan2(sb, R[0, 0])
+    if sb < 1e-9:
+        a = math.atan2(R[2, 1], R[1, 1])
+        return np.array([a, b, 0.0])
+    return np.array([math.atan2(R[1, 0], -R[2, 0]), b, math.atan2(R[0, 1], R[0, 2])])
 
 
 def _rot(axis: FloatArray, angle: float) -> FloatArray:
@@ -176,7 +191,9 @@ class SegmentRetargeter:
         # a3 = Rot(a2, psi) a1 = cos(psi) a1 - sin(psi) (a1 x a2)
         psi = float(np.arctan2(-(a3 @ a12), a3 @ a1))
         R_local_init = R_parent.T @ self._frame_R(q, child_frame)
-        return _Prepared(g, idx, C, psi, virtual, R_local_init, child_frame, parent_frame)
+        return _Prepared(
+            g, idx, C, psi, virtual, R_local_init, _rot(a2, psi), child_frame, parent_frame
+        )
 
     def calibrate(self, R_chest_segment: Mapping[str, Any]) -> None:
         """Store the human segments' orientations in the initialisation posture.
@@ -245,9 +262,8 @@ class SegmentRetargeter:
         """Angles (k,) about the group's axes, and the virtual third angle (or 0)."""
         # Rot(a3, d3) = Rot(a2, psi) Rot(a1, d3) Rot(a2, -psi), so
         # M Rot(a2, psi) = Rot(a1, d1) Rot(a2, d2 + psi) Rot(a1, d3): proper Euler (1, 2, 1)
-        Mp = M @ _rot(p.C[:, 1], p.psi)
-        local = p.C.T @ Mp @ p.C
-        e = euler_from_quat(quat_from_matrix(local), "XYX")
+        local = p.C.T @ (M @ p.R_psi) @ p.C
+        e = _euler_xyx(local)
         cands = [e, np.array([e[0] + np.pi, -e[1], e[2] + np.pi])]
         prev = self._q_prev[p.idx] - self.q_init[p.idx]
         k = len(p.idx)

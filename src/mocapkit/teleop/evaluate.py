@@ -126,7 +126,7 @@ def evaluate_shape(
     """Run one shape through the whole chain in real time (about shape_s + 4.5 s)."""
     rng = np.random.default_rng(seed)
     motion = operator_motion(shape, shape_s=shape_s)
-    true_q, meas_q = _sensor_quats(motion, rng, noise or NoiseModel())
+    _true_q, meas_q = _sensor_quats(motion, rng, noise or NoiseModel())
     arm = robonaut2_arm("right")
     q_init = robonaut2_init_posture("right")
     groups = robonaut2_groups("right")[:2]  # the paper's two sensors: 5 joints
@@ -146,9 +146,10 @@ def evaluate_shape(
         reports.append((t, r.pos.copy()))
 
     cfg = server or ServerConfig()
-    with spawn_robot_server(cfg, max_seconds=shape_s + 60) as srv, RobotLink(
-        srv.address, on_report=on_report
-    ) as link:
+    with (
+        spawn_robot_server(cfg, max_seconds=shape_s + 60) as srv,
+        RobotLink(srv.address, on_report=on_report) as link,
+    ):
         link.send_hold()
         link.wait_for_report(10.0)
         session = TeleopSession(SessionConfig())
@@ -187,12 +188,14 @@ def evaluate_shape(
         raise RuntimeError(
             f"{shape}: the session never engaged; transitions: {session.transitions}"
         )
-    cmd = np.stack([f.out.command[:3, 3] for f, u in zip(frames, use, strict=True) if u])  # type: ignore[index]
+    cmds = [f.out.command for f, u in zip(frames, use, strict=True) if u]
+    cmd = np.stack([c[:3, 3] for c in cmds if c is not None])
     dp, _ = session.offset()
     # the truth command: the same offset taken at the same instant from the truth model
     first = int(np.flatnonzero(cmd_ok)[0])
-    assert frames[first].T_model is not None
-    dp_truth = dp + frames[first].T_model[:3, 3] - T_truth[first][:3, 3]
+    T_first = frames[first].T_model
+    assert T_first is not None
+    dp_truth = dp + T_first[:3, 3] - T_truth[first][:3, 3]
     ref = T_truth[use][:, :3, 3] + dp_truth
     t_rep = np.array([r[0] for r in reports]) - start
     p_rep = np.stack([r[1] for r in reports])
@@ -211,7 +214,9 @@ def evaluate_shape(
         commanded=np.column_stack([t_rel[use], cmd]),
         achieved=np.column_stack([t_rel[use], achieved]),
         truth=np.column_stack([t_rel[use], ref]),
-        transitions=[f"{tr.source.value}->{tr.target.value}: {tr.reason}" for tr in session.transitions],
+        transitions=[
+            f"{tr.source.value}->{tr.target.value}: {tr.reason}" for tr in session.transitions
+        ],
     )
     if plot is not None:
         plot_shapes([result], plot)

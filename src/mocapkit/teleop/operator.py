@@ -140,7 +140,7 @@ def operator_motion(
     shape once (time-smoothed), hold."""
     arm = human_right_arm()
     q_work = np.radians([35.0, 10.0, 20.0, 90.0, 90.0, 0.0, 0.0])  # forearm forward
-    n = int(round((rest_s + reach_s + shape_s + hold_s) * rate_hz))
+    n = round((rest_s + reach_s + shape_s + hold_s) * rate_hz)
     t = np.arange(n) / rate_hz
     q = np.empty((n, arm.n))
     params = IkParams(rot_weight_m=1e-3, max_iters=50, tol_pos_m=1e-6, tol_rot_rad=10.0)

@@ -146,16 +146,18 @@ class ArmTeleop:
         if self.root_sensor is not None:
             R_ws = quat_to_matrix(self.latest[self.root_sensor])
             self._R_chestsensor_chest = R_ws.T @ self.R_world_chest
+        self.retargeter.calibrate(self._segments())
+
+    def _segments(self) -> dict[str, FloatArray]:
         Rc = self._R_world_chest_now()
-        self.retargeter.calibrate(
-            {seg: Rc.T @ quat_to_matrix(self.latest[sid]) for sid, seg in self.sensor_segments.items()}
-        )
+        return {
+            seg: Rc.T @ quat_to_matrix(self.latest[sid])
+            for sid, seg in self.sensor_segments.items()
+        }
 
     def model_pose(self) -> tuple[FloatArray | None, FloatArray | None]:
         """(q, T_chest_ee) of the intermediate model from the latest orientations."""
-        Rc = self._R_world_chest_now()
-        R = {seg: Rc.T @ quat_to_matrix(self.latest[sid]) for sid, seg in self.sensor_segments.items()}
-        res = self.retargeter.joint_angles(R)
+        res = self.retargeter.joint_angles(self._segments())
         return res.q, self.model.fk(res.q)
 
     def process(self, samples: Iterable[SampleLike], now: float | None = None) -> FrameLog:
@@ -165,9 +167,11 @@ class ArmTeleop:
         for s in samples:
             t_arrival = s.t_arrival_ns if t_arrival is None else min(t_arrival, s.t_arrival_ns)
             self.watchdog.update(s.sensor_id, t, s.quat)
-            if s.sensor_id in self.watchdog.last_valid_s and s.quat is not None:
-                if s.sensor_id not in self.watchdog.bad:
-                    self.latest[s.sensor_id] = np.asarray(s.quat, dtype=float)
+            valid = (
+                s.sensor_id in self.watchdog.last_valid_s and s.sensor_id not in self.watchdog.bad
+            )
+            if valid and s.quat is not None:
+                self.latest[s.sensor_id] = np.asarray(s.quat, dtype=float)
         fault = self.watchdog.fault(t)
         q = T = None
         if fault is None:

@@ -118,9 +118,7 @@ class RobotSim:
     def _set(self, gate: proto.Gate, reason: proto.Reason) -> None:
         s = self.state
         if (gate, reason) != (s.gate, s.reason):
-            log.info(
-                "gate", extra={"gate": gate.name, "reason": reason.name, "from": s.gate.name}
-            )
+            log.info("gate", extra={"gate": gate.name, "reason": reason.name, "from": s.gate.name})
         s.gate, s.reason = gate, reason
 
     def on_command(self, cmd: proto.Command, now: float) -> bool:

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import StrEnum
 from typing import Any, Literal
 
 import numpy as np
@@ -31,7 +31,7 @@ from mocapkit.teleop import protocol as proto
 log = logging.getLogger("mocapkit.teleop.session")
 
 
-class State(str, Enum):
+class State(StrEnum):
     DISABLED = "disabled"
     ALIGNING = "aligning"
     ENGAGED = "engaged"
@@ -222,7 +222,8 @@ class TeleopSession:
                 self._last_sent = None
                 return TickOutput(self.state, hold=True, notes=[fault])
             return TickOutput(self.state, notes=[fault])
-        assert T_model is not None and robot_pose is not None
+        assert T_model is not None
+        assert robot_pose is not None
         robot = np.asarray(robot_pose, dtype=float)
         if self.state == State.HELD:
             self.fault = None
@@ -257,12 +258,15 @@ class TeleopSession:
                 return TickOutput(self.state, hold=True, notes=[*notes, why])
         else:
             self._far_since = None
-        if robot_gate is not None and robot_gate != proto.Gate.SYNCED and self._last_sent is not None:
-            if robot_reason in (proto.Reason.JUMP, proto.Reason.TIMEOUT, proto.Reason.TOO_FAR):
-                self._reindex_pending = c.mode == "relative"
-                why = f"robot server dropped synchronisation ({robot_reason.name})"
-                self._go(t, State.ALIGNING, why)
-                return TickOutput(self.state, notes=[*notes, why])
+        if (
+            robot_gate is not None
+            and robot_gate != proto.Gate.SYNCED
+            and self._last_sent is not None
+        ) and robot_reason in (proto.Reason.JUMP, proto.Reason.TIMEOUT, proto.Reason.TOO_FAR):
+            self._reindex_pending = c.mode == "relative"
+            why = f"robot server dropped synchronisation ({robot_reason.name})"
+            self._go(t, State.ALIGNING, why)
+            return TickOutput(self.state, notes=[*notes, why])
         self._last_sent = cmd
         return TickOutput(self.state, command=cmd, notes=notes)
 
