@@ -37,7 +37,7 @@ import numpy as np
 
 from mocapkit._validate import FloatArray
 from mocapkit.errors import ConfigError, MocapkitError
-from mocapkit.robot.ik import IkParams, ik_step
+from mocapkit.robot.ik import IkParams, ik_step, solve_ik
 from mocapkit.robot.model import ArmModel, pose_distance, pose_matrix, pose_parts
 from mocapkit.teleop import protocol as proto
 
@@ -110,6 +110,7 @@ class RobotSim:
         self.q = arm.clamp(arm.check_q(q0, "q_start"))
         self.state = SimState()
         self.ik = IkParams()
+        self._last_reach_check = -np.inf
 
     def pose(self) -> FloatArray:
         """Actual end-effector pose T_base_ee (4, 4)."""
@@ -174,17 +175,22 @@ class RobotSim:
         if s.target is None:
             return
         max_dq = self.arm.velocity_limit * c.velocity_scale * dt
-        q_new, err, _ = ik_step(self.arm, self.q, s.target, self.ik, max_dq=max_dq)
-        moved = float(np.max(np.abs(q_new - self.q) / max_dq))
-        self.q = q_new
+        self.q, err, _ = ik_step(self.arm, self.q, s.target, self.ik, max_dq=max_dq)
         far = np.linalg.norm(err[:3]) > _UNREACHABLE_POS_M or np.linalg.norm(err[3:]) > (
             _UNREACHABLE_ROT_RAD
         )
-        if s.gate == proto.Gate.SYNCED:
-            if far and moved < 0.02 and not s.pending:
+        if s.gate != proto.Gate.SYNCED:
+            return
+        if far and now - self._last_reach_check >= 0.1:
+            # far from the target: is it reachable at all? (full solve, at most 10 Hz)
+            self._last_reach_check = now
+            reached = solve_ik(self.arm, s.target, self.q, self.ik).reached
+            if not reached:
                 self._set(s.gate, proto.Reason.UNREACHABLE)
-            elif s.reason == proto.Reason.UNREACHABLE and not far:
+            elif s.reason == proto.Reason.UNREACHABLE:
                 self._set(s.gate, proto.Reason.OK)
+        elif not far and s.reason == proto.Reason.UNREACHABLE:
+            self._set(s.gate, proto.Reason.OK)
 
     def report(self, seq: int, t_ns: int) -> bytes:
         pos, quat = pose_parts(self.pose())
