@@ -71,3 +71,17 @@ def test_orientation_series_validation() -> None:
         OrientationSeries(t, [[1.0, 0, 0, 0], [2.0, 0, 0, 0], [1.0, 0, 0, 0]])
     with pytest.raises(DataError, match="sample 0 is partly NaN"):
         OrientationSeries(t, [[np.nan, 0, 0, 0], [1.0, 0, 0, 0], [1.0, 0, 0, 0]])
+
+
+def test_joint_angle_series() -> None:
+    from mocapkit.series import JointAngleSeries
+
+    t = np.arange(3) * 0.1
+    s = JointAngleSeries(t, ["knee_angle_r", "hip_flexion_r"], np.zeros((3, 2)))
+    assert s.column("hip_flexion_r").shape == (3,)
+    with pytest.raises(DataError, match="no coordinate 'ankle'; available: knee_angle_r"):
+        s.column("ankle")
+    with pytest.raises(DataError, match="duplicated coordinate name"):
+        JointAngleSeries(t, ["a", "a"], np.zeros((3, 2)))
+    with pytest.raises(ShapeError, match=r"joints.values: expected shape \(3, 2\)"):
+        JointAngleSeries(t, ["a", "b"], np.zeros((3, 3)))
