@@ -242,3 +242,34 @@ def test_udp_stream_with_a_flooding_sender() -> None:
     assert st_.sensors[2].lost == 0
     assert st_.dropped.get("rate_limited", 0) > 0
     assert st_.sensors[3].duplicate > 0  # the admitted replays were caught as duplicates
+
+
+def test_stale_sensor_detected_and_fresh_again(caplog: pytest.LogCaptureFixture) -> None:
+    rx = _rx(stale_after_s=0.1, missing_after_s=1.0)
+    t = time.perf_counter_ns()
+    _feed(rx, _raw(4, 0, 1000), t_ns=t)
+    # a frozen node: new sequence numbers but its clock does not advance
+    for k in range(1, 5):
+        _feed(rx, _raw(4, k, 1000), t_ns=t + k * 50_000_000)
+    with caplog.at_level(logging.WARNING):
+        rx._housekeeping(t + 200_000_000)
+    assert rx.stats().sensors[4].state == "stale"
+    assert "sensor 4 stale" in caplog.text
+    _feed(rx, _raw(4, 5, 2000), t_ns=t + 250_000_000)
+    assert rx.stats().sensors[4].state == "ok"
+    assert [e.kind for e in rx.events()] == ["added", "stale", "fresh"]
+
+
+def test_replayed_old_traffic_is_stale_while_the_sensor_is_live() -> None:
+    rx = _rx()
+    t = time.perf_counter_ns()
+    for seq in range(400):
+        _feed(rx, _raw(2, seq), t_ns=t + seq * 1_000_000)
+    for k, seq in enumerate(range(0, 30)):  # an attacker replays a captured run
+        _feed(rx, _raw(2, seq), t_ns=t + (400 + k) * 1_000_000)
+        _feed(rx, _raw(2, 400 + k), t_ns=t + (400 + k) * 1_000_000)
+    got = [s.seq for s in _drain(rx)]
+    assert got == list(range(430))
+    st_ = rx.stats().sensors[2]
+    assert st_.stale == 30
+    assert st_.lost == 0

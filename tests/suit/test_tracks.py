@@ -58,12 +58,12 @@ def test_sixteen_bit_wrap() -> None:
 
 
 def test_restart_after_consecutive_old_sequence_numbers() -> None:
-    tr = SensorTrack(restart_after=4)
+    tr = SensorTrack(restart_after=4, restart_quiet_s=0.25)
     for s in range(1000, 1010):
         tr.push(s, s, 0.0)
     out = []
-    for s in range(0, 6):  # the sensor rebooted: counts from 0 again
-        out += _seqs(tr.push(s, s, 0.0))
+    for s in range(0, 6):  # the sensor rebooted: counts from 0 again, its old stream stopped
+        out += _seqs(tr.push(s, s, 1.0))
     assert tr.counts.restarts == 1
     assert tr.counts.stale == 4
     assert out == [4, 5]
@@ -77,3 +77,17 @@ def test_large_gap_flushes_buffered_runs_in_order() -> None:
     assert _seqs(tr.push(100, 100, 0.0)) == [3, 4, 5, 8, 100]
     assert tr.counts.lost == 2 + 2 + 91
     assert tr.pending == {}
+
+
+def test_replay_of_old_traffic_while_live_cannot_hijack_the_sequence() -> None:
+    tr = SensorTrack(restart_after=4, restart_quiet_s=0.25)
+    for s in range(1000, 1300):
+        tr.push(s, s, s * 1e-3)
+    got = []
+    for k, s in enumerate(range(1300, 1340)):
+        now = 0.3 + k * 1e-3
+        got += _seqs(tr.push(100 + k, 100 + k, now))  # a replayed old run, in sequence
+        got += _seqs(tr.push(s, s, now))  # the live sensor
+    assert got == list(range(1300, 1340))
+    assert tr.counts.stale == 40
+    assert tr.counts.restarts == 0

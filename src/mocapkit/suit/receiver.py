@@ -54,6 +54,8 @@ class ReceiverConfig:
         protocols: ``"suit"``, ``"slimevr"`` or ``"auto"`` (by the first byte).
         reorder_window_s: how long an out-of-order packet may wait for a gap to fill [s].
         missing_after_s: a sensor silent this long is "missing" [s].
+        stale_after_s: a sensor that keeps sending but brings nothing new this long (only
+            duplicates, or a sensor clock that does not advance: a frozen node) is "stale" [s].
         source_rate_hz, source_burst: token bucket per source address [packets/s, packets].
         queue_per_sensor: bounded queue length per sensor (oldest dropped when full).
         record_samples: also write decoded samples to the recorder (JSON channel).
@@ -63,6 +65,7 @@ class ReceiverConfig:
     protocols: Literal["suit", "slimevr", "auto"] = "auto"
     reorder_window_s: float = 0.02
     missing_after_s: float = 0.5
+    stale_after_s: float = 0.5
     source_rate_hz: float = 60_000.0
     source_burst: float = 20_000.0
     queue_per_sensor: int = 8192
@@ -71,7 +74,13 @@ class ReceiverConfig:
     def __post_init__(self) -> None:
         if self.protocols not in ("suit", "slimevr", "auto"):
             raise ConfigError(f"protocols: expected suit, slimevr or auto, got {self.protocols!r}")
-        for name in ("reorder_window_s", "missing_after_s", "source_rate_hz", "source_burst"):
+        for name in (
+            "reorder_window_s",
+            "missing_after_s",
+            "stale_after_s",
+            "source_rate_hz",
+            "source_burst",
+        ):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"{name}: expected > 0, got {getattr(self, name)}")
         if self.queue_per_sensor < 1:
@@ -96,6 +105,8 @@ class _Sensor:
         self.latencies: deque[float] = deque(maxlen=4096)
         self.window_start = 0
         self.window_count = 0
+        self.t_sensor_max = -math.inf
+        self.last_fresh_ns = 0
 
     def track(self, key: object) -> SensorTrack:
         tr = self.tracks.get(key)
@@ -245,6 +256,7 @@ class Receiver:
         if s is None:
             with self._cv:
                 s = self._sensors[sensor_id] = _Sensor(sensor_id, self.cfg)
+            s.last_fresh_ns = now_ns
             self._events.append(SensorEvent("added", sensor_id, now_ns))
             log.info("suit: sensor %d added", sensor_id)
         elif s.stats.state == "missing":
@@ -335,6 +347,15 @@ class Receiver:
             self._drop(
                 "queue_full", f"sensor {st.sensor_id}: consumer too slow, oldest sample dropped"
             )
+        t_s = sample.t_sensor_s
+        if not math.isfinite(t_s) or t_s > s.t_sensor_max:
+            if math.isfinite(t_s):
+                s.t_sensor_max = t_s
+            s.last_fresh_ns = sample.t_arrival_ns
+            if st.state == "stale":
+                st.state = "ok"
+                self._events.append(SensorEvent("fresh", st.sensor_id, sample.t_arrival_ns))
+                log.info("suit: sensor %d sends new samples again", st.sensor_id)
         if math.isfinite(sample.t_sensor_s):
             offset = sample.t_arrival_ns * 1e-9 - sample.t_sensor_s
             if offset < s.offset_min:
@@ -365,9 +386,11 @@ class Receiver:
         if now - self._last_check < 0.05:
             return
         self._last_check = now
-        for s in self._sensors.values():
+        for s in list(self._sensors.values()):
             st = s.stats
-            if st.state == "ok" and now - st.last_arrival_ns * 1e-9 > self.cfg.missing_after_s:
+            if st.state == "missing":
+                continue
+            if now - st.last_arrival_ns * 1e-9 > self.cfg.missing_after_s:
                 st.state = "missing"
                 st.rate_hz = 0.0
                 self._events.append(SensorEvent("missing", st.sensor_id, now_ns))
@@ -375,6 +398,15 @@ class Receiver:
                     "suit: sensor %d missing (silent for %.2f s)",
                     st.sensor_id,
                     self.cfg.missing_after_s,
+                )
+            elif st.state == "ok" and now - s.last_fresh_ns * 1e-9 > self.cfg.stale_after_s:
+                st.state = "stale"
+                self._events.append(SensorEvent("stale", st.sensor_id, now_ns))
+                log.warning(
+                    "suit: sensor %d stale: packets arrive but nothing new for %.2f s "
+                    "(duplicates or a frozen sensor clock)",
+                    st.sensor_id,
+                    self.cfg.stale_after_s,
                 )
 
     def _drop(self, reason: str, message: str) -> None:

@@ -40,8 +40,9 @@ class SuitSample:
 @dataclass(frozen=True, slots=True)
 class SensorEvent:
     """A change in the set of sensors: ``"added"`` (first packet), ``"missing"`` (silent
-    for ``missing_after_s``), ``"back"`` (a missing sensor spoke again), ``"restarted"``
-    (its sequence counter restarted)."""
+    for ``missing_after_s``), ``"back"`` (a missing sensor spoke again), ``"stale"``
+    (packets arrive but nothing new for ``stale_after_s``), ``"fresh"`` (a stale sensor
+    sends new samples again), ``"restarted"`` (its sequence counter restarted)."""
 
     kind: str
     sensor_id: int

@@ -9,8 +9,10 @@ numbers are 16-bit on the wire and unwrapped here relative to the next expected 
   on), or at once if the gap exceeds ``max_gap`` (a long outage: no point waiting);
 - behind: a *duplicate* if that seq was delivered recently, otherwise *stale* (it came
   after we gave up on it, or it is a replay of old traffic). ``restart_after``
-  consecutive behind packets in sequence mean the sensor restarted its counter: the
-  track resynchronises (logged).
+  consecutive behind packets in sequence, while nothing has come forward for
+  ``restart_quiet_s``, mean the sensor restarted its counter: the track resynchronises.
+  (A replay of old traffic while the sensor is live stays *stale*: it cannot hijack the
+  sequence.)
 """
 
 from __future__ import annotations
@@ -44,10 +46,13 @@ class SensorTrack:
         max_gap: int = 64,
         history: int = 256,
         restart_after: int = 8,
+        restart_quiet_s: float = 0.25,
     ) -> None:
         self.reorder_window_s = reorder_window_s
         self.max_gap = max_gap
         self.restart_after = restart_after
+        self.restart_quiet_s = restart_quiet_s
+        self._last_forward_s = -float("inf")
         self.expected: int | None = None  # next unwrapped seq to deliver
         self.pending: dict[int, tuple[float, Any]] = {}
         self.recent: deque[int] = deque(maxlen=history)
@@ -87,15 +92,18 @@ class SensorTrack:
         """Offer a packet; returns the ``(unwrapped seq, item)`` pairs now deliverable."""
         out: list[tuple[int, Any]] = []
         if self.expected is None:
+            self._last_forward_s = now_s
             self._deliver_from(seq16, item, out)
             return out
         seq = self.unwrap(seq16)
         if seq == self.expected:
             self._behind_run = 0
+            self._last_forward_s = now_s
             self._deliver_from(seq, item, out)
             return out
         if seq > self.expected:
             self._behind_run = 0
+            self._last_forward_s = now_s
             if seq in self.pending:
                 self.counts.duplicate += 1
                 return out
@@ -115,7 +123,8 @@ class SensorTrack:
         else:
             self._behind_run = 1
         self._behind_last = seq
-        if self._behind_run >= self.restart_after:
+        quiet = now_s - self._last_forward_s >= self.restart_quiet_s
+        if self._behind_run >= self.restart_after and quiet:
             self.restart()
             self.counts.restarts += 1
         return out
