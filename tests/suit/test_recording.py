@@ -26,9 +26,9 @@ from mocapkit.suit.simulator import SuitSimConfig, SuitSimulator
 from mocapkit.suit.transport import UdpTransport
 
 
-def _record(path: Path, send_all: object) -> tuple[Receiver, int]:
+def _record(path: Path, send_all: object, samples: str = "at_close") -> tuple[Receiver, int]:
     rx_t = UdpTransport.bind("127.0.0.1", 0)
-    rec = McapRecorder(path)
+    rec = McapRecorder(path, samples=samples)  # type: ignore[arg-type]
     rx = Receiver(rx_t, recorder=rec).start()
     tx = UdpTransport.connect("127.0.0.1", rx_t.port)
     try:
@@ -61,15 +61,20 @@ def test_record_then_replay_is_bit_for_bit(tmp_path: Path) -> None:
     rx_a, n = _record(a, first)
     frames_a = [f.data for f in read_frames(a)]
     assert frames_a == bad + sent
-    _, n2 = _record(b, lambda send: replay(a, send, speed=0))
+    _, n2 = _record(b, lambda send: replay(a, send, speed=0), samples="live")
     assert n2 == n
     assert [f.data for f in read_frames(b)] == frames_a
     assert rx_a.stats().dropped == {"truncated": 1, "bad_crc": 1}
-    samples = read_samples(a)
-    assert len(samples) == len(sent)
+    samples = read_samples(a)  # decoded at close
+    live = read_samples(b)  # the receiver's delivered samples
+    assert len(samples) == len(live) == len(sent)
     assert set(samples[0]) == set(SAMPLE_SCHEMA["properties"])  # type: ignore[arg-type]
     assert samples[0]["kind"] == "RAW"
     assert len(samples[0]["gyr"]) == 3
+    by_key = {(m["sensor_id"], m["seq"]): m for m in live}
+    assert sorted(by_key) == sorted((m["sensor_id"], m["seq"]) for m in samples)
+    for m in samples:
+        assert m["gyr"] == by_key[(m["sensor_id"], m["seq"])]["gyr"]
     dec = decode_recording(a)
     assert len(dec) == len(sent)
     assert dec.n_frames == len(sent)
@@ -153,3 +158,21 @@ def test_fast_frame_reader_equals_the_mcap_reader(tmp_path: Path) -> None:
     np.testing.assert_array_equal(fb.log_time_ns, [r.log_time_ns for r in ref])
     with pytest.raises(FileNotFoundError):
         read_frame_buffer(tmp_path / "nope.mcap")
+
+
+def test_sample_json_is_valid_and_complete() -> None:
+    from mocapkit.suit.protocol import Kind
+    from mocapkit.suit.recording import sample_json
+    from mocapkit.suit.samples import SuitSample
+
+    raw = SuitSample(3, 7, 1.25, 99, Kind.RAW, None, np.array([0.1, -2.0, 3e-7]),
+                     np.array([0.0, 0.0, 9.81]), None)  # fmt: skip
+    ori = SuitSample(1, 2, float("nan"), 5, Kind.ORIENTATION, np.array([1.0, 0.0, 0.0, 0.0]),
+                     source="slimevr")  # fmt: skip
+    a, b = json.loads(sample_json(raw)), json.loads(sample_json(ori))
+    assert set(a) == set(b) == set(SAMPLE_SCHEMA["properties"])  # type: ignore[arg-type]
+    assert a["gyr"] == [0.1, -2.0, 3e-7]
+    assert a["mag"] is None
+    assert a["kind"] == "RAW"
+    assert b["t_sensor_s"] is None
+    assert b["quat"] == {"w": 1.0, "x": 0.0, "y": 0.0, "z": 0.0}

@@ -81,6 +81,13 @@ def register(sub: Any) -> None:
         r.add_argument("--seconds", type=float, help="stop after this long (default: Ctrl-C)")
         r.add_argument("--protocols", default="auto", choices=["auto", "suit", "slimevr"])
         r.add_argument("--json", action="store_true", help="print one JSON summary at the end")
+        r.add_argument(
+            "--samples",
+            choices=["live", "at-close", "none"],
+            help="decoded samples channel: live (the receiver's stream; SlimeVR; up to a few "
+            "kHz), at-close (decoded when the recording closes; the default for our protocol), "
+            "none",
+        )
         if name == "record":
             r.add_argument("--out", required=True, help="MCAP file to write")
         else:
@@ -259,7 +266,8 @@ def _receive(args: argparse.Namespace) -> int:
         else UdpTransport.bind(args.host, args.port)
     )
     out = getattr(args, "out", None) or getattr(args, "record", None)
-    recorder = McapRecorder(out) if out else None
+    mode = args.samples or ("live" if args.protocols == "slimevr" else "at-close")
+    recorder = McapRecorder(out, samples=mode.replace("-", "_")) if out else None
     rx = Receiver(transport, ReceiverConfig(protocols=args.protocols), recorder)
     stop = threading.Event()
 

@@ -58,7 +58,6 @@ class ReceiverConfig:
             duplicates, or a sensor clock that does not advance: a frozen node) is "stale" [s].
         source_rate_hz, source_burst: token bucket per source address [packets/s, packets].
         queue_per_sensor: bounded queue length per sensor (oldest dropped when full).
-        record_samples: also write decoded samples to the recorder (JSON channel).
     """
 
     allowed_ids: frozenset[int] | None = None
@@ -69,7 +68,6 @@ class ReceiverConfig:
     source_rate_hz: float = 60_000.0
     source_burst: float = 20_000.0
     queue_per_sensor: int = 8192
-    record_samples: bool = True
 
     def __post_init__(self) -> None:
         if self.protocols not in ("suit", "slimevr", "auto"):
@@ -368,7 +366,7 @@ class Receiver:
         s.window_count += 1
         for fn in self._listeners:
             fn(sample)
-        if self.recorder is not None and self.cfg.record_samples:
+        if self.recorder is not None:
             self.recorder.write_sample(sample)
 
     def _housekeeping(self, now_ns: int) -> None:
