@@ -267,7 +267,8 @@ def _receive(args: argparse.Namespace) -> int:
     )
     out = getattr(args, "out", None) or getattr(args, "record", None)
     mode = args.samples or ("live" if args.protocols == "slimevr" else "at-close")
-    recorder = McapRecorder(out, samples=mode.replace("-", "_")) if out else None
+    samples_mode: Any = mode.replace("-", "_")
+    recorder = McapRecorder(out, samples=samples_mode) if out else None
     rx = Receiver(transport, ReceiverConfig(protocols=args.protocols), recorder)
     stop = threading.Event()
 
