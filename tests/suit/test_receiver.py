@@ -3,6 +3,7 @@ fairness under flooding, consumer API, over real loopback UDP where it matters."
 
 from __future__ import annotations
 
+import io
 import logging
 import socket
 import struct
@@ -273,3 +274,27 @@ def test_replayed_old_traffic_is_stale_while_the_sensor_is_live() -> None:
     st_ = rx.stats().sensors[2]
     assert st_.stale == 30
     assert st_.lost == 0
+
+
+def test_samples_iterator_ends_after_timeout() -> None:
+    rx = _rx()
+    for seq in range(3):
+        _feed(rx, _raw(1, seq))
+    assert [s.seq for s in rx.samples(timeout_s=0.01)] == [0, 1, 2]
+    assert rx.pending == 0
+
+
+def test_live_table_renders() -> None:
+    from rich.console import Console
+
+    from mocapkit.cli.suit_cmd import _table
+
+    rx = _rx()
+    for seq in (0, 1, 3):
+        _feed(rx, _raw(2, seq))
+    _feed(rx, b"\xa5")
+    console = Console(width=160, record=True, file=io.StringIO())
+    console.print(_table(rx))
+    text = console.export_text()
+    assert "suit receiver: 4 datagrams, 1 dropped {'truncated': 1}" in text
+    assert "latency p50 ms" in text

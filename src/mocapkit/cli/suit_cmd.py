@@ -43,6 +43,7 @@ def register(sub: Any) -> None:
     s.add_argument("--host", default="127.0.0.1")
     s.add_argument("--port", type=int, default=9000, help="UDP port of the receiver")
     s.add_argument("--serial-port", help="send over this serial device instead of UDP")
+    s.add_argument("--baud", type=int, default=921_600, help="serial line speed [bit/s]")
     s.add_argument("--sensors", type=int, default=15, help="number of sensors, 1..15")
     s.add_argument("--rate-hz", type=float, default=100.0, help="IMU sampling rate [Hz]")
     s.add_argument("--seconds", type=float, default=10.0, help="length of the motion [s]")
@@ -78,6 +79,7 @@ def register(sub: Any) -> None:
         r.add_argument("--host", default="0.0.0.0")
         r.add_argument("--port", type=int, default=9000)
         r.add_argument("--serial-port", help="receive from this serial device instead of UDP")
+        r.add_argument("--baud", type=int, default=921_600, help="serial line speed [bit/s]")
         r.add_argument("--seconds", type=float, help="stop after this long (default: Ctrl-C)")
         r.add_argument("--protocols", default="auto", choices=["auto", "suit", "slimevr"])
         r.add_argument("--json", action="store_true", help="print one JSON summary at the end")
@@ -151,7 +153,7 @@ def _simulate(args: argparse.Namespace) -> int:
     rng = np.random.default_rng(args.seed)
     sim = SuitSimulator.from_motion(args.motion, args.sensors, args.seconds, args.rate_hz, cfg, rng)
     transport: Transport = (
-        SerialTransport(args.serial_port)
+        SerialTransport(args.serial_port, args.baud)
         if args.serial_port
         else UdpTransport.connect(args.host, args.port)
     )
@@ -261,7 +263,7 @@ def _receive(args: argparse.Namespace) -> int:
     from mocapkit.suit.transport import SerialTransport, Transport, UdpTransport
 
     transport: Transport = (
-        SerialTransport(args.serial_port)
+        SerialTransport(args.serial_port, args.baud)
         if args.serial_port
         else UdpTransport.bind(args.host, args.port)
     )
