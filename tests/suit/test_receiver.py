@@ -298,3 +298,12 @@ def test_live_table_renders() -> None:
     text = console.export_text()
     assert "suit receiver: 4 datagrams, 1 dropped {'truncated': 1}" in text
     assert "latency p50 ms" in text
+
+
+def test_many_sources_do_not_grow_memory_without_bound() -> None:
+    rx = _rx()
+    t = time.perf_counter_ns()
+    for i in range(10_000):
+        _feed(rx, b"\xa5\x00", source=("10.0.0.1", i), t_ns=t + i * 1_000_000)
+    assert len(rx._buckets) <= 4096
+    assert rx.stats().dropped == {"truncated": 10_000}

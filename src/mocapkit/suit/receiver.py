@@ -35,6 +35,7 @@ from mocapkit.suit.transport import Frame, Transport
 
 log = logging.getLogger(__name__)
 _WRAP_US = 1 << 32
+_MAX_SOURCES = 4096  # token buckets kept at once
 
 
 class FrameRecorder(Protocol):
@@ -235,6 +236,10 @@ class Receiver:
         b = self._buckets.get(source)
         now = now_ns * 1e-9
         if b is None:
+            if len(self._buckets) >= _MAX_SOURCES:  # many (spoofed) sources: forget idle ones
+                idle = [k for k, v in self._buckets.items() if now - v[1] > 1.0]
+                for k in idle or list(self._buckets)[: _MAX_SOURCES // 2]:
+                    del self._buckets[k]
             b = self._buckets[source] = [self.cfg.source_burst, now]
         tokens = min(self.cfg.source_burst, b[0] + (now - b[1]) * self.cfg.source_rate_hz)
         b[1] = now
@@ -374,13 +379,12 @@ class Receiver:
         if self._pending_count:
             self._pending_count = 0
             for s in self._sensors.values():
-                for key, tr in s.tracks.items():
+                for tr in s.tracks.values():
                     if tr.pending:
-                        self._pending_count += 1
                         for seq, item in tr.flush(now):
                             item.seq = seq
                             self._deliver(s, item)
-                        del key
+                        self._pending_count += bool(tr.pending)
         if now - self._last_check < 0.05:
             return
         self._last_check = now
