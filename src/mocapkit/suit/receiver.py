@@ -20,8 +20,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
-from typing import Any, Literal, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -29,97 +28,12 @@ from mocapkit.errors import ConfigError
 from mocapkit.suit import slimevr
 from mocapkit.suit.errors import ProtocolError, UnknownSensorError
 from mocapkit.suit.protocol import MAX_SENSOR_ID, SYNC, Kind, Packet, decode
+from mocapkit.suit.receiver_state import FrameRecorder, ReceiverConfig, SensorState
 from mocapkit.suit.samples import ReceiverStats, SensorEvent, SensorStats, SuitSample
-from mocapkit.suit.tracks import SensorTrack
 from mocapkit.suit.transport import Frame, Transport
 
 log = logging.getLogger(__name__)
-_WRAP_US = 1 << 32
 _MAX_SOURCES = 4096  # token buckets kept at once
-
-
-class FrameRecorder(Protocol):
-    """What the receiver needs from a recorder (``recording.McapRecorder``)."""
-
-    def write_frame(self, data: bytes, t_arrival_ns: int, source: Any) -> None: ...
-
-    def write_sample(self, sample: SuitSample) -> None: ...
-
-
-@dataclass(frozen=True)
-class ReceiverConfig:
-    """Receiver settings.
-
-    Attributes:
-        allowed_ids: sensor IDs to accept (None: any of 1..15, new ones are "added").
-        protocols: ``"suit"``, ``"slimevr"`` or ``"auto"`` (by the first byte).
-        reorder_window_s: how long an out-of-order packet may wait for a gap to fill [s].
-        missing_after_s: a sensor silent this long is "missing" [s].
-        stale_after_s: a sensor that keeps sending but brings nothing new this long (only
-            duplicates, or a sensor clock that does not advance: a frozen node) is "stale" [s].
-        source_rate_hz, source_burst: token bucket per source address [packets/s, packets].
-        queue_per_sensor: bounded queue length per sensor (oldest dropped when full).
-    """
-
-    allowed_ids: frozenset[int] | None = None
-    protocols: Literal["suit", "slimevr", "auto"] = "auto"
-    reorder_window_s: float = 0.02
-    missing_after_s: float = 0.5
-    stale_after_s: float = 0.5
-    source_rate_hz: float = 60_000.0
-    source_burst: float = 20_000.0
-    queue_per_sensor: int = 8192
-
-    def __post_init__(self) -> None:
-        if self.protocols not in ("suit", "slimevr", "auto"):
-            raise ConfigError(f"protocols: expected suit, slimevr or auto, got {self.protocols!r}")
-        for name in (
-            "reorder_window_s",
-            "missing_after_s",
-            "stale_after_s",
-            "source_rate_hz",
-            "source_burst",
-        ):
-            if not getattr(self, name) > 0:
-                raise ConfigError(f"{name}: expected > 0, got {getattr(self, name)}")
-        if self.queue_per_sensor < 1:
-            raise ConfigError(f"queue_per_sensor: expected >= 1, got {self.queue_per_sensor}")
-        if self.allowed_ids is not None and not all(
-            1 <= i <= MAX_SENSOR_ID for i in self.allowed_ids
-        ):
-            raise ConfigError(f"allowed_ids: expected IDs in 1..{MAX_SENSOR_ID}")
-
-
-class _Sensor:
-    """Receiver-side state of one sensor."""
-
-    def __init__(self, sensor_id: int, cfg: ReceiverConfig) -> None:
-        self.stats = SensorStats(sensor_id)
-        self.tracks: dict[object, SensorTrack] = {}
-        self.cfg = cfg
-        self.queue: deque[SuitSample] = deque()
-        self.t_wraps = 0
-        self.t_last_us: int | None = None
-        self.offset_min = math.inf
-        self.latencies: deque[float] = deque(maxlen=4096)
-        self.window_start = 0
-        self.window_count = 0
-        self.t_sensor_max = -math.inf
-        self.last_fresh_ns = 0
-
-    def track(self, key: object) -> SensorTrack:
-        tr = self.tracks.get(key)
-        if tr is None:
-            tr = self.tracks[key] = SensorTrack(self.cfg.reorder_window_s)
-        return tr
-
-    def unwrap_time(self, t_us: int) -> float:
-        if self.t_last_us is not None and t_us < self.t_last_us - (_WRAP_US >> 1):
-            self.t_wraps += 1
-        elif self.t_last_us is not None and t_us > self.t_last_us + (_WRAP_US >> 1):
-            return (self.t_wraps - 1) * 4294.967296 + t_us * 1e-6  # late, before a wrap
-        self.t_last_us = t_us
-        return self.t_wraps * 4294.967296 + t_us * 1e-6
 
 
 class Receiver:
@@ -140,7 +54,7 @@ class Receiver:
         self.transport = transport
         self.cfg = config or ReceiverConfig()
         self.recorder = recorder
-        self._sensors: dict[int, _Sensor] = {}
+        self._sensors: dict[int, SensorState] = {}
         self._stats = ReceiverStats()
         self._buckets: dict[Any, list[float]] = {}
         self._events: deque[SensorEvent] = deque(maxlen=1024)
@@ -249,7 +163,7 @@ class Receiver:
         b[0] = tokens - 1.0
         return True
 
-    def _sensor(self, sensor_id: int, now_ns: int) -> _Sensor:
+    def _sensor(self, sensor_id: int, now_ns: int) -> SensorState:
         allowed = self.cfg.allowed_ids
         if allowed is not None and sensor_id not in allowed:
             raise UnknownSensorError(
@@ -258,7 +172,7 @@ class Receiver:
         s = self._sensors.get(sensor_id)
         if s is None:
             with self._cv:
-                s = self._sensors[sensor_id] = _Sensor(sensor_id, self.cfg)
+                s = self._sensors[sensor_id] = SensorState(sensor_id, self.cfg)
             s.last_fresh_ns = now_ns
             self._events.append(SensorEvent("added", sensor_id, now_ns))
             log.info("suit: sensor %d added", sensor_id)
@@ -321,7 +235,7 @@ class Receiver:
         return sid
 
     def _sequence(
-        self, s: _Sensor, key: object, seq16: int, sample: SuitSample, now_ns: int
+        self, s: SensorState, key: object, seq16: int, sample: SuitSample, now_ns: int
     ) -> None:
         tr = s.track(key)
         before = tr.counts.restarts
@@ -335,7 +249,7 @@ class Receiver:
             item.seq = seq
             self._deliver(s, item)
 
-    def _deliver(self, s: _Sensor, sample: SuitSample) -> None:
+    def _deliver(self, s: SensorState, sample: SuitSample) -> None:
         st = s.stats
         with self._cv:
             full = len(s.queue) >= self.cfg.queue_per_sensor
