@@ -164,8 +164,7 @@ def _simulate(args: argparse.Namespace) -> int:
         link = RadioLink(transport.send, params, np.random.default_rng(args.seed + 1))
         send = link.send
     print(
-        f"suit: streaming {args.sensors} sensors ({args.mode}) to {transport.name}"
-        + (f" {args.host}:{args.port}" if not args.serial_port else ""),
+        f"suit: streaming {args.sensors} sensors ({args.mode}) to {transport.name}",
         file=sys.stderr,
     )
     t0 = time.perf_counter()

@@ -70,7 +70,8 @@ class UdpTransport(Transport):
     def __init__(self, sock: socket.socket, peer: tuple[str, int] | None = None) -> None:
         self.sock = sock
         self.peer = peer
-        self.name = f"udp://{sock.getsockname()[0]}:{sock.getsockname()[1]}"
+        host, port = peer if peer is not None else sock.getsockname()[:2]
+        self.name = f"udp://{host}:{port}"
 
     @classmethod
     def bind(cls, host: str = "127.0.0.1", port: int = 0) -> UdpTransport:
