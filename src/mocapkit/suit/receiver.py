@@ -67,6 +67,7 @@ class Receiver:
         self._log_last: dict[str, float] = {}
         self._log_suppressed: dict[str, int] = {}
         self._slime_ids: dict[tuple[Any, int], int] = {}
+        self._slime_last: dict[Any, int] = {}
         self._last_check = 0.0
         self._pending_count = 0
 
@@ -203,13 +204,26 @@ class Receiver:
         self._sequence(s, pkt.kind, pkt.seq, sample, now_ns)
 
     def _on_slimevr(self, data: bytes, source: Any, now_ns: int) -> None:
-        for m in slimevr.parse(data):
-            if m.type == slimevr.HANDSHAKE:
-                self.transport.reply(slimevr.handshake_reply(), source)
+        """SlimeVR packet numbers count every packet of a *device* (all its sensors and
+        packet types), so order is checked per device, as the SlimeVR server does: a
+        packet not newer than the last one is dropped; a handshake starts over."""
+        messages = slimevr.parse(data)
+        if any(m.type == slimevr.HANDSHAKE for m in messages):
+            self.transport.reply(slimevr.handshake_reply(), source)
+            self._slime_last.pop(source, None)
+            for m in messages:
                 log.info(
                     "slimevr: handshake from %s (firmware %r, mac %s)", source, m.firmware, m.mac
                 )
-                continue
+            return
+        num = messages[0].packet_number
+        last = self._slime_last.get(source)
+        if last is not None and num <= last:
+            reason = "duplicate" if num == last else "stale"
+            self._drop(reason, f"SlimeVR packet {num} from {source} is not newer than {last}")
+            return
+        self._slime_last[source] = num
+        for m in messages:
             if m.quat is None:
                 continue
             sid = self._slime_id(source, m.sensor_id)
@@ -217,7 +231,8 @@ class Receiver:
             sample = SuitSample(
                 sid, 0, math.nan, now_ns, Kind.ORIENTATION, m.quat, acc=m.acc, source="slimevr"
             )
-            self._sequence(s, "slimevr", m.packet_number & 0xFFFF, sample, now_ns)
+            s.slime_seq += 1
+            self._sequence(s, "slimevr", s.slime_seq & 0xFFFF, sample, now_ns)
 
     def _slime_id(self, source: Any, tracker_sensor: int) -> int:
         key = (source, tracker_sensor)

@@ -82,6 +82,7 @@ class SensorState:
         self.window_start = 0
         self.window_count = 0
         self.t_sensor_max = -math.inf
+        self.slime_seq = -1  # SlimeVR: per-sensor count of accepted samples
         self.last_fresh_ns = 0
 
     def track(self, key: object) -> SensorTrack:
