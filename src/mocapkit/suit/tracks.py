@@ -27,7 +27,10 @@ _MOD = 1 << 16
 
 @dataclass
 class TrackCounts:
-    """What happened to one stream's packets (all counts are packets)."""
+    """What happened to one stream's packets (all counts are packets).
+
+    ``reordered`` counts packets delivered from the reorder buffer, i.e. that waited for
+    an earlier one (which then came late, or was declared lost)."""
 
     delivered: int = 0
     duplicate: int = 0
