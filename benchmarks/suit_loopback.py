@@ -1,7 +1,8 @@
 """Benchmark: 15 sensors x 1 kHz raw samples, simulator -> loopback UDP -> receiver.
 
 Run: ``.venv/bin/python -m benchmarks.suit_loopback [--repeats 3] [--seconds 10]``.
-Prints one JSON object per run and a summary; figures go to docs/benchmarks.md.
+Each repeat runs the simulator in its own process and then in a thread of the receiver's
+process. Prints one JSON object per run and a summary; figures go to docs/benchmarks.md.
 """
 
 from __future__ import annotations
@@ -22,9 +23,11 @@ def main() -> None:
     args = ap.parse_args()
     runs = []
     for i in range(args.repeats):
-        r = run_loopback_bench(args.sensors, args.rate_hz, args.seconds, seed=i)
-        runs.append(r)
-        print(json.dumps(r))
+        for sender in ("process", "thread"):
+            r = run_loopback_bench(args.sensors, args.rate_hz, args.seconds, seed=i, sender=sender)
+            r["load_avg_1min"] = os.getloadavg()[0]
+            runs.append(r)
+            print(json.dumps(r))
     print(
         json.dumps(
             {

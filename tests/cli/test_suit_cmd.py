@@ -43,10 +43,12 @@ def test_help_lists_examples(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["suit", "receive", "--help"]) == 0
 
 
-def test_bench_prints_exactly_the_five_figures(capsys: pytest.CaptureFixture[str]) -> None:
-    code = main(
-        ["suit", "bench", "--sensors", "3", "--rate-hz", "200", "--seconds", "0.3", "--json"]
-    )
+@pytest.mark.parametrize("sender", ["process", "thread"])
+def test_bench_prints_exactly_the_five_figures(
+    sender: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["suit", "bench", "--sensors", "3", "--rate-hz", "200", "--seconds", "0.3", "--json"]
+    code = main([*argv, "--sender", sender])
     assert code == 0
     obj = json.loads(capsys.readouterr().out)
     assert list(obj) == ["sent", "received", "lost", "latency_ms_p50", "latency_ms_p99"]

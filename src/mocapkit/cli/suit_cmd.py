@@ -119,6 +119,12 @@ def register(sub: Any) -> None:
     b.add_argument("--sensors", type=int, default=15)
     b.add_argument("--rate-hz", type=float, default=1000.0)
     b.add_argument("--seconds", type=float, default=10.0)
+    b.add_argument(
+        "--sender",
+        default="process",
+        choices=["process", "thread"],
+        help="run the simulator in its own process (default) or in a thread of this one",
+    )
     b.add_argument("--json", action="store_true")
     b.set_defaults(func=_bench)
 
@@ -371,7 +377,7 @@ def _decode(args: argparse.Namespace) -> int:
 def _bench(args: argparse.Namespace) -> int:
     from mocapkit.suit.bench import run_loopback_bench
 
-    r = run_loopback_bench(args.sensors, args.rate_hz, args.seconds)
+    r = run_loopback_bench(args.sensors, args.rate_hz, args.seconds, sender=args.sender)
     keys = ("sent", "received", "lost", "latency_ms_p50", "latency_ms_p99")
     if args.json:
         print_json({k: r[k] for k in keys})
