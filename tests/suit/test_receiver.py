@@ -307,3 +307,11 @@ def test_many_sources_do_not_grow_memory_without_bound() -> None:
         _feed(rx, b"\xa5\x00", source=("10.0.0.1", i), t_ns=t + i * 1_000_000)
     assert len(rx._buckets) <= 4096
     assert rx.stats().dropped == {"truncated": 10_000}
+
+
+def test_bundle_entry_outside_the_allow_list_drops_only_that_entry() -> None:
+    rx = _rx(allowed_ids=frozenset({1, 2}))
+    q = np.array([1.0, 0.0, 0.0, 0.0])
+    _feed(rx, encode_bundle(0, 0, [(1, q), (9, q), (2, q)]))
+    assert [s.sensor_id for s in _drain(rx)] == [1, 2]
+    assert rx.stats().dropped == {"unknown_sensor": 1}

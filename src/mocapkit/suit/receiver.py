@@ -189,7 +189,11 @@ class Receiver:
     def _on_packet(self, pkt: Packet, now_ns: int, source: Any) -> None:
         if pkt.kind is Kind.BUNDLE:
             for sid, quat in pkt.entries:
-                s = self._sensor(sid, now_ns)
+                try:
+                    s = self._sensor(sid, now_ns)
+                except UnknownSensorError as exc:  # drop that entry, keep the others
+                    self._drop(exc.reason, f"bundle {pkt.seq} from {source}: {exc}")
+                    continue
                 sample = SuitSample(sid, 0, s.unwrap_time(pkt.t_us), now_ns, Kind.ORIENTATION, quat)
                 self._sequence(s, Kind.BUNDLE, pkt.seq, sample, now_ns)
             return
