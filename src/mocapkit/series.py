@@ -58,7 +58,7 @@ def _interpolate_rows(t: FloatArray, x: FloatArray) -> FloatArray:
 def _check_mag_gaps(mag: FloatArray, name: str, fix: str) -> None:
     """Magnetometer rows may be all-NaN (a gap: the filters propagate without the
     magnetometer there); a partly NaN row or an infinite value is an error."""
-    gap = np.isnan(mag).all(axis=1)
+    gap: np.ndarray = np.asarray(np.isnan(mag).all(axis=1))
     bad = ~np.isfinite(mag) & ~gap[:, None]
     if bad.any():
         i, c = (int(v) for v in np.argwhere(bad)[0])
