@@ -27,6 +27,9 @@ Choices (the seed gives only eq. 15 and one sentence):
   has full column rank); it never turns the heading. Likewise with only the
   magnetometer rows when the accelerometer sample is rejected.
 - The four-component step also changes the norm of q; the normalisation removes it.
+- Discretisation and time stamps as for ``miller`` (its choices 7 and 9): forward
+  Euler from the readings at ``t_k`` gives the estimate at ``t_{k+1}``; ``run``
+  returns for each sample the estimate at its own time.
 - The accelerometer and magnetometer rows weigh the same, as in the original: a
   magnetic disturbance also tilts the estimate. That is the filter's known weakness
   and is kept.
@@ -160,6 +163,7 @@ class BachmannFilter(OrientationFilter):
         q = np.array(self.state.quat, dtype=np.float64)
         out = np.empty((inputs.gyr.shape[0], 4))
         for i in range(out.shape[0]):
+            out[i] = q  # the estimate at this sample's time (miller.py, choice 9)
             q = bachmann_step(
                 q,
                 inputs.gyr[i],
@@ -171,7 +175,6 @@ class BachmannFilter(OrientationFilter):
                 m_ref,
                 self.params.alpha,
             )
-            out[i] = q
         self.state.quat = q.copy()
         return out
 

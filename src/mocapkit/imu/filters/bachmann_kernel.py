@@ -80,7 +80,9 @@ def bachmann_run_kernel(
     mag_ok: bool,
     alpha: float,
 ) -> np.ndarray:
-    """Run N steps from ``q`` (4,), which holds the final estimate after; returns (N, 4)."""
+    """Run N steps from ``q`` (4,), the estimate at the first sample's time; on return
+    ``q`` holds the estimate after the last sample. Returns (N, 4) estimates at the
+    samples' times."""
     n = gyr.shape[0]
     out = np.empty((n, 4))
     omega = np.zeros(4)
@@ -93,6 +95,8 @@ def bachmann_run_kernel(
     rhs = np.zeros(4)
     step = np.zeros(4)
     for t in range(n):
+        for c in range(4):  # the estimate at this sample's time (see miller.py, choice 9)
+            out[t, c] = q[c]
         h = dt[t]
         omega[1] = gyr[t, 0] * h
         omega[2] = gyr[t, 1] * h
@@ -150,5 +154,4 @@ def bachmann_run_kernel(
         norm = math.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2 + q[3] ** 2)
         for c in range(4):
             q[c] /= norm
-            out[t, c] = q[c]
     return out

@@ -10,7 +10,10 @@ x towards magnetic east, y towards magnetic north). It has
 - :meth:`~OrientationFilter.update`: one sample (gyr rad/s, acc m/s^2, optional mag)
   -> quaternion (4,);
 - :meth:`~OrientationFilter.run`: a batch (N, 3) -> (N, 4), continuing from the current
-  state, so that ``run(a); run(b)`` equals ``run(concat(a, b))`` (the split-run property);
+  state, so that ``run(a); run(b)`` equals ``run(concat(a, b))`` (the split-run property).
+  Row k is the estimate at sample k's time. (The paper's step-correct filters compute
+  the estimate at ``t + dt`` from the readings at t, so their row k uses the readings
+  before sample k, and their state after a run is the estimate for the next sample.)
 - 6D (``mag=None``) and 9D modes;
 - ``backend="reference"`` (readable numpy/Python) and ``backend="fast"`` (numba), which
   agree to 1e-9 on real data.
@@ -185,7 +188,7 @@ def _dt_array(dt: Any, n: int, default: float) -> FloatArray:
     if bad.size:
         i = int(bad[0])
         raise DataError(
-            f"dt: sample {i} has time step {arr[i]!r} s; time steps must be positive and "
+            f"dt: sample {i} has time step {float(arr[i])!r} s; time steps must be positive and "
             "finite (sort the samples and drop duplicated time stamps)"
         )
     return arr

@@ -52,9 +52,10 @@ def miller_run_kernel(
     use_mag: np.ndarray,
     alpha: float,
 ) -> np.ndarray:
-    """Run eq. 2-14 over N samples from ``q`` (4,), which holds the final estimate after.
+    """Run eq. 2-14 over N samples from ``q`` (4,), the estimate at the first sample's
+    time; ``q`` holds the estimate at the time after the last sample on return.
 
-    Returns (N, 4) estimates ``q_world_sensor``.
+    Returns (N, 4) estimates ``q_world_sensor`` at the samples' times.
     """
     n = gyr.shape[0]
     out = np.empty((n, 4))
@@ -68,6 +69,8 @@ def miller_run_kernel(
     m_h = np.zeros(3)
     angles = np.zeros(3)
     for t in range(n):
+        for c in range(4):  # the estimate at this sample's time (see miller.py, choice 9)
+            out[t, c] = q[c]
         h = dt[t]
         omega[0] = 0.0
         omega[1] = gyr[t, 0] * h
@@ -115,5 +118,4 @@ def miller_run_kernel(
         norm = math.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2 + q[3] ** 2)
         for c in range(4):
             q[c] /= norm
-            out[t, c] = q[c]
     return out
