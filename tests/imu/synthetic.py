@@ -20,8 +20,8 @@ def constant_rotation(
     q0: np.ndarray, rate: np.ndarray, n: int, rate_hz: float = 100.0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(q_true (n, 4), gyr (n, 3), acc (n, 3), mag (n, 3)) at sample times k / rate_hz,
-    k = 0..n-1, so ``q_true[0] == q0``."""
-    t = np.arange(n) / rate_hz
+    k = 1..n: a filter started from ``q0`` (time 0) outputs row k - 1 at time k / rate_hz."""
+    t = np.arange(1, n + 1) / rate_hz
     q = quat_mul(np.asarray(q0, float), quat_exp(0.5 * t[:, None] * np.asarray(rate, float)))
     gyr = np.tile(np.asarray(rate, float), (n, 1))
     acc = quat_rotate_inv(q, np.array([0.0, 0.0, GRAVITY]))

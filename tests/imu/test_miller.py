@@ -120,10 +120,10 @@ def test_alpha_zero_is_the_papers_gyroscope_integration() -> None:
     f.reset([1.0, 0.0, 0.0, 0.0])
     q = np.array([1.0, 0.0, 0.0, 0.0])
     expected = []
-    for w in gyr:  # eq. 2-4 and 14 by hand; row k is the estimate at t_k
-        expected.append(q)
+    for w in gyr:  # eq. 2-4 and 14 by hand
         q = q + 0.5 * quat_mul(q, np.concatenate([[0.0], w * 0.01]))
         q = q / np.linalg.norm(q)
+        expected.append(q)
     np.testing.assert_allclose(f.run(gyr, acc, mag), expected, atol=1e-15)
 
 

@@ -3,13 +3,15 @@ correction (Bachmann, McGhee, Yun, Zyda 2001), the comparison of the seed paper'
 
 One step, with ``q`` the estimate ``q_world_sensor``:
 
-1. gyroscope integration, as in the paper's eq. 2-4: ``dq = 1/2 q [0, gyr dt]``;
+1. gyroscope integration, as in the paper's eq. 2-4: ``dq = 1/2 q [0, gyr dt]``,
+   ``q_pred = (q + dq) / |q + dq|``;
 2. measurement ``y0 = [acc/|acc|; mag/|mag|]`` (6,), the sensed gravity and magnetic
    field directions in the sensor frame;
-3. computed measurement ``y(q) = [q* g_ref q; q* m_ref q]`` with ``g_ref = [0, 0, 1]``
-   and the *full* field direction ``m_ref = [0, cos(dip), -sin(dip)]`` (ENU, dip
-   measured at initialisation): Bachmann's filter compares the actual field vector,
-   dip included, not a horizontal one;
+3. computed measurement ``y(q) = [q* g_ref q; q* m_ref q]`` at ``q = q_pred``, with
+   ``g_ref = [0, 0, 1]`` and the *full* field direction
+   ``m_ref = [0, cos(dip), -sin(dip)]`` (ENU, dip measured at initialisation):
+   Bachmann's filter compares the actual field vector, dip included, not a
+   horizontal one;
 4. ``eps(q) = y0 - y(q)`` and ``X = d y / d q`` (6 x 4), the partial derivatives with
    respect to the four components of q (:func:`measurement_jacobian`, analytic,
    tested against finite differences);
@@ -27,9 +29,9 @@ Choices (the seed gives only eq. 15 and one sentence):
   has full column rank); it never turns the heading. Likewise with only the
   magnetometer rows when the accelerometer sample is rejected.
 - The four-component step also changes the norm of q; the normalisation removes it.
-- Discretisation and time stamps as for ``miller`` (its choices 7 and 9): forward
-  Euler from the readings at ``t_k`` gives the estimate at ``t_{k+1}``; ``run``
-  returns for each sample the estimate at its own time.
+- Discretisation and time alignment as for ``miller`` (its choices 7 and 9): Euler
+  integration, and ``y(q)``, ``X`` evaluated at the gyroscope-propagated estimate
+  (the orientation at the readings' time).
 - The accelerometer and magnetometer rows weigh the same, as in the original: a
   magnetic disturbance also tilts the estimate. That is the filter's known weakness
   and is kept.
@@ -124,14 +126,15 @@ def bachmann_step(
 ) -> FloatArray:
     """One step from ``q`` (4,); returns the normalised next estimate."""
     dq = 0.5 * quat_mul(q, np.concatenate([[0.0], gyr * dt]))
+    q_pred = (q + dq) / np.linalg.norm(q + dq)  # the orientation at the readings' time
     rows: list[FloatArray] = []
     residuals: list[FloatArray] = []
     if use_acc:
-        rows.append(measurement_jacobian(q, G_REF))
-        residuals.append(acc / np.linalg.norm(acc) - computed_measurement(q, G_REF))
+        rows.append(measurement_jacobian(q_pred, G_REF))
+        residuals.append(acc / np.linalg.norm(acc) - computed_measurement(q_pred, G_REF))
     if use_mag:
-        rows.append(measurement_jacobian(q, m_ref))
-        residuals.append(mag / np.linalg.norm(mag) - computed_measurement(q, m_ref))
+        rows.append(measurement_jacobian(q_pred, m_ref))
+        residuals.append(mag / np.linalg.norm(mag) - computed_measurement(q_pred, m_ref))
     q_next = q + dq
     if rows:
         step = gauss_newton_step(np.vstack(rows), np.concatenate(residuals))
@@ -163,7 +166,6 @@ class BachmannFilter(OrientationFilter):
         q = np.array(self.state.quat, dtype=np.float64)
         out = np.empty((inputs.gyr.shape[0], 4))
         for i in range(out.shape[0]):
-            out[i] = q  # the estimate at this sample's time (miller.py, choice 9)
             q = bachmann_step(
                 q,
                 inputs.gyr[i],
@@ -175,6 +177,7 @@ class BachmannFilter(OrientationFilter):
                 m_ref,
                 self.params.alpha,
             )
+            out[i] = q
         self.state.quat = q.copy()
         return out
 

@@ -80,13 +80,13 @@ def bachmann_run_kernel(
     mag_ok: bool,
     alpha: float,
 ) -> np.ndarray:
-    """Run N steps from ``q`` (4,), the estimate at the first sample's time; on return
-    ``q`` holds the estimate after the last sample. Returns (N, 4) estimates at the
-    samples' times."""
+    """Run N steps from ``q`` (4,), which holds the last estimate on return; returns
+    (N, 4) estimates at the samples' times."""
     n = gyr.shape[0]
     out = np.empty((n, 4))
     omega = np.zeros(4)
     dq = np.zeros(4)
+    q_pred = np.zeros(4)
     X = np.zeros((6, 4))
     eps = np.zeros(6)
     jac = np.zeros((3, 4))
@@ -95,17 +95,21 @@ def bachmann_run_kernel(
     rhs = np.zeros(4)
     step = np.zeros(4)
     for t in range(n):
-        for c in range(4):  # the estimate at this sample's time (see miller.py, choice 9)
-            out[t, c] = q[c]
         h = dt[t]
         omega[1] = gyr[t, 0] * h
         omega[2] = gyr[t, 1] * h
         omega[3] = gyr[t, 2] * h
         quat_mul_into(q, omega, dq)
+        for c in range(4):
+            dq[c] *= 0.5
+            q_pred[c] = q[c] + dq[c]
+        norm = math.sqrt(q_pred[0] ** 2 + q_pred[1] ** 2 + q_pred[2] ** 2 + q_pred[3] ** 2)
+        for c in range(4):
+            q_pred[c] /= norm
         rows = 0
         if use_acc[t]:
             na = math.sqrt(acc[t, 0] ** 2 + acc[t, 1] ** 2 + acc[t, 2] ** 2)
-            _measurement_rows(q, _G_REF, jac, y)
+            _measurement_rows(q_pred, _G_REF, jac, y)
             for r in range(3):
                 eps[rows + r] = acc[t, r] / na - y[r]
                 for c in range(4):
@@ -113,7 +117,7 @@ def bachmann_run_kernel(
             rows += 3
         if use_mag[t] and mag_ok:
             nm = math.sqrt(mag[t, 0] ** 2 + mag[t, 1] ** 2 + mag[t, 2] ** 2)
-            _measurement_rows(q, m_ref, jac, y)
+            _measurement_rows(q_pred, m_ref, jac, y)
             for r in range(3):
                 eps[rows + r] = mag[t, r] / nm - y[r]
                 for c in range(4):
@@ -150,8 +154,9 @@ def bachmann_run_kernel(
                     s += X[r, c] * rhs[r]
                 step[c] = s
         for c in range(4):
-            q[c] = q[c] + 0.5 * dq[c] + alpha * h * step[c]
+            q[c] = q[c] + dq[c] + alpha * h * step[c]
         norm = math.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2 + q[3] ** 2)
         for c in range(4):
             q[c] /= norm
+            out[t, c] = q[c]
     return out

@@ -11,9 +11,8 @@ x towards magnetic east, y towards magnetic north). It has
   -> quaternion (4,);
 - :meth:`~OrientationFilter.run`: a batch (N, 3) -> (N, 4), continuing from the current
   state, so that ``run(a); run(b)`` equals ``run(concat(a, b))`` (the split-run property).
-  Row k is the estimate at sample k's time. (The paper's step-correct filters compute
-  the estimate at ``t + dt`` from the readings at t, so their row k uses the readings
-  before sample k, and their state after a run is the estimate for the next sample.)
+  Row k is the estimate at sample k's time, using the readings up to and including k
+  (a gyroscope sample is the rate over the interval ending at its time stamp).
 - 6D (``mag=None``) and 9D modes;
 - ``backend="reference"`` (readable numpy/Python) and ``backend="fast"`` (numba), which
   agree to 1e-9 on real data.

@@ -66,14 +66,15 @@ Choices where the paper is ambiguous or misprinted:
    rejected sample) the magnetic angle is 0: the heading is integrated from the
    gyroscope only. Without a usable accelerometer sample all error angles are 0.
 
-9. *Time stamps.* Eq. 13 computes ``q_{t+dt}`` from ``q_t`` and the readings at t.
-   A sample's readings are taken at its own time ``t_k``, so the step applied to them
-   gives the estimate at ``t_{k+1}``. :meth:`run` therefore returns for sample k the
-   estimate at ``t_k`` (the state before that sample's step), and the state after a
-   run is the estimate for the next sample's time. Returning the step's result as the
-   estimate at ``t_k`` would lead the truth by one sample: a bias of ``|w| dt``
-   (0.13 deg at 0.23 rad/s and 100 Hz, seen in the tests) on top of the filter's error.
-
+9. *Time alignment.* A gyroscope sample is taken as the rate over the interval that
+   ends at its time stamp (the convention of BROAD's data and of vqf's and Madgwick's
+   implementations), the accelerometer and magnetometer samples as readings at that
+   time. Eq. 6-7 and 12 are therefore evaluated at the gyroscope-propagated estimate
+   ``q_t + dq`` (normalised), the orientation at the readings' time, and eq. 13 is
+   then applied as printed. Evaluating them at ``q_t``, as the printed eq. 12 reads,
+   compares the readings with the orientation one sample earlier and leaves a steady
+   lag of ``|w| dt`` (0.13 deg at 0.23 rad/s and 100 Hz in the tests, several degrees
+   during BROAD's fast rotations).
 The gain ``alpha`` default (:data:`DEFAULT_ALPHA`) was tuned on the BROAD trials by
 leave-one-out cross-validation (``python -m benchmarks.tune_gains``; see docs/imu.md).
 """
@@ -189,13 +190,15 @@ def miller_step(
     use_mag: bool,
     alpha: float,
 ) -> FloatArray:
-    """One step of eq. 2-14 from ``q`` (4,); returns the normalised next estimate."""
+    """One step of eq. 2-14 from ``q`` (4,), the estimate at the previous sample's time;
+    returns the normalised estimate at this sample's time (choice 9)."""
     omega = np.concatenate([[0.0], gyr * dt])  # eq. 2
     dq = 0.5 * quat_mul(q, omega)  # eq. 3
-    angles = error_angles(q, acc, mag, use_acc, use_mag)
+    q_pred = (q + dq) / np.linalg.norm(q + dq)  # eq. 4, 14: the orientation at the readings' time
+    angles = error_angles(q_pred, acc, mag, use_acc, use_mag)  # eq. 6-10 and Fig. 3
     eps = np.concatenate([[0.0], angles * dt])  # eq. 11
-    q_correct = 0.5 * quat_mul(q, eps)  # eq. 12
-    q_next = q + dq - alpha * q_correct  # eq. 4 and 13
+    q_correct = 0.5 * quat_mul(q_pred, eps)  # eq. 12
+    q_next = q + dq - alpha * q_correct  # eq. 13
     return q_next / np.linalg.norm(q_next)  # eq. 14
 
 
@@ -215,7 +218,6 @@ class MillerFilter(OrientationFilter):
         q = np.array(self.state.quat, dtype=np.float64)
         out = np.empty((inputs.gyr.shape[0], 4))
         for i in range(out.shape[0]):
-            out[i] = q  # the estimate at this sample's time (miller.py, choice 9)
             q = miller_step(
                 q,
                 inputs.gyr[i],
@@ -226,6 +228,7 @@ class MillerFilter(OrientationFilter):
                 bool(inputs.use_mag[i]),
                 self.params.alpha,
             )
+            out[i] = q
         self.state.quat = q.copy()
         return out
 

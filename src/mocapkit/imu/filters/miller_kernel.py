@@ -52,16 +52,14 @@ def miller_run_kernel(
     use_mag: np.ndarray,
     alpha: float,
 ) -> np.ndarray:
-    """Run eq. 2-14 over N samples from ``q`` (4,), the estimate at the first sample's
-    time; ``q`` holds the estimate at the time after the last sample on return.
-
-    Returns (N, 4) estimates ``q_world_sensor`` at the samples' times.
-    """
+    """Run eq. 2-14 over N samples from ``q`` (4,), which holds the last estimate on
+    return. Returns (N, 4) estimates ``q_world_sensor`` at the samples' times."""
     n = gyr.shape[0]
     out = np.empty((n, 4))
     omega = np.zeros(4)
     eps = np.zeros(4)
     dq = np.zeros(4)
+    q_pred = np.zeros(4)
     q_correct = np.zeros(4)
     g_local = np.zeros(3)
     m_local = np.zeros(3)
@@ -69,8 +67,6 @@ def miller_run_kernel(
     m_h = np.zeros(3)
     angles = np.zeros(3)
     for t in range(n):
-        for c in range(4):  # the estimate at this sample's time (see miller.py, choice 9)
-            out[t, c] = q[c]
         h = dt[t]
         omega[0] = 0.0
         omega[1] = gyr[t, 0] * h
@@ -79,6 +75,10 @@ def miller_run_kernel(
         quat_mul_into(q, omega, dq)
         for c in range(4):
             dq[c] *= 0.5
+            q_pred[c] = q[c] + dq[c]
+        norm = math.sqrt(q_pred[0] ** 2 + q_pred[1] ** 2 + q_pred[2] ** 2 + q_pred[3] ** 2)
+        for c in range(4):
+            q_pred[c] /= norm
         angles[0] = 0.0
         angles[1] = 0.0
         angles[2] = 0.0
@@ -86,7 +86,7 @@ def miller_run_kernel(
             na = math.sqrt(acc[t, 0] ** 2 + acc[t, 1] ** 2 + acc[t, 2] ** 2)
             for c in range(3):
                 g_sensed[c] = acc[t, c] / na
-            rotate_inv_into(q, _G_REF, g_local)
+            rotate_inv_into(q_pred, _G_REF, g_local)
             k = 2
             if abs(g_sensed[1]) > abs(g_sensed[k]):
                 k = 1
@@ -96,7 +96,7 @@ def miller_run_kernel(
                 if axis != k:
                     angles[axis] = _law_of_cosines_angle(g_local, g_sensed, axis)
             if use_mag[t]:
-                rotate_inv_into(q, _M_REF, m_local)
+                rotate_inv_into(q_pred, _M_REF, m_local)
                 d = mag[t, 0] * g_local[0] + mag[t, 1] * g_local[1] + mag[t, 2] * g_local[2]
                 for c in range(3):
                     m_h[c] = mag[t, c] - d * g_local[c]
@@ -110,7 +110,7 @@ def miller_run_kernel(
         eps[1] = angles[0] * h
         eps[2] = angles[1] * h
         eps[3] = angles[2] * h
-        quat_mul_into(q, eps, q_correct)
+        quat_mul_into(q_pred, eps, q_correct)
         for c in range(4):
             q_correct[c] *= 0.5
         for c in range(4):
@@ -118,4 +118,5 @@ def miller_run_kernel(
         norm = math.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2 + q[3] ** 2)
         for c in range(4):
             q[c] /= norm
+            out[t, c] = q[c]
     return out
