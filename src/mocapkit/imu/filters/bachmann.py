@@ -57,7 +57,7 @@ from mocapkit.imu.filters.base import (
     register_filter,
 )
 
-DEFAULT_ALPHA = 1.0  # [1/s], tuned like miller's (docs/imu.md)
+DEFAULT_ALPHA = 0.16  # [1/s], tuned like miller's (docs/imu.md)
 G_REF = np.array([0.0, 0.0, 1.0])
 
 

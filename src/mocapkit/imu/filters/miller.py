@@ -99,7 +99,7 @@ from mocapkit.imu.filters.base import (
 )
 from mocapkit.imu.filters.miller_kernel import miller_run_kernel
 
-DEFAULT_ALPHA = 1.0  # [1/s], see the module docstring
+DEFAULT_ALPHA = 0.11  # [1/s], see the module docstring
 G_REF = np.array([0.0, 0.0, 1.0])  # up, ENU world
 M_REF = np.array([0.0, 1.0, 0.0])  # dip-corrected magnetic north, ENU world
 _MIN_PROJECTION = 1e-9
