@@ -44,4 +44,4 @@ def common_time_base(series: list[OrientationSeries]) -> FloatArray:
     steps = [float(np.median(np.diff(s.time))) for s in series if s.n_samples > 1]
     step = float(np.median(steps)) if steps else stop - start
     n = int(np.floor((stop - start) / step + 1e-9)) + 1
-    return start + step * np.arange(n)
+    return np.asarray(start + step * np.arange(n), dtype=np.float64)
