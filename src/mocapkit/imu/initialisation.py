@@ -31,6 +31,7 @@ import numpy as np
 from mocapkit._validate import FloatArray, as_vectors, check_finite
 from mocapkit.errors import DataError
 from mocapkit.geometry import (
+    quat_exp,
     quat_from_axis_angle,
     quat_from_matrix,
     quat_from_two_vectors,
@@ -153,6 +154,26 @@ def orientation_from_references(refs: ReferenceVectors, prior: Any = None) -> Fl
     up_estimated = quat_rotate(q_prior, up)
     q_fix = quat_from_two_vectors(up_estimated, UP_WORLD)
     return quat_normalize(quat_mul(q_fix, q_prior))
+
+
+def rotate_to_first_frame(gyr: Any, dt: Any, vectors: Any) -> FloatArray:
+    """Express sensor-frame ``vectors`` (K, 3), sampled at K consecutive samples, in the
+    sensor frame of the time just before the first sample, using the gyroscope.
+
+    With ``D_i = exp(gyr_0 dt_0 / 2) * ... * exp(gyr_i dt_i / 2)`` (the rotation from that
+    time to sample i, a gyroscope sample being the rate over the interval ending at it),
+    the result is ``D_i v_i``. Averaging these instead of the raw samples removes the
+    motion during an initialisation window, so a filter that starts moving starts right.
+    """
+    g = as_vectors(gyr, "gyr", 3)
+    v = as_vectors(vectors, "vectors", 3)
+    steps = np.broadcast_to(np.asarray(dt, dtype=np.float64), (g.shape[0],))
+    out = np.empty_like(v)
+    d = quat_identity()
+    for i in range(v.shape[0]):
+        d = quat_mul(d, quat_exp(0.5 * g[i] * steps[i]))
+        out[i] = quat_rotate(d, v[i])
+    return out
 
 
 def initial_orientation(acc_window: Any, mag_window: Any = None, prior: Any = None) -> FloatArray:

@@ -20,7 +20,9 @@ x towards magnetic east, y towards magnetic north). It has
 Initialisation. A new filter is *uninitialised*: the first call to ``run``/``update``
 takes the orientation from the first ``params.init_window_s`` seconds of samples (mean
 accelerometer and magnetometer directions, :mod:`mocapkit.imu.initialisation`), in any
-orientation, instead of starting from the identity. :meth:`~OrientationFilter.reinitialize`
+orientation, instead of starting from the identity. The window's samples are first
+turned into one frame with the gyroscope, so a sensor that moves during the window
+still starts right. :meth:`~OrientationFilter.reinitialize`
 does the same on command at any time without touching the rest of the state (the
 paper's wished-for software reset); :meth:`~OrientationFilter.reset` starts over or
 from a given quaternion.
@@ -58,7 +60,11 @@ import numpy as np
 
 from mocapkit._validate import FloatArray, as_float_array, check_finite, check_shape
 from mocapkit.errors import ConfigError, DataError
-from mocapkit.imu.initialisation import orientation_from_references, reference_vectors
+from mocapkit.imu.initialisation import (
+    orientation_from_references,
+    reference_vectors,
+    rotate_to_first_frame,
+)
 from mocapkit.series import ImuRecording, OrientationSeries
 
 Backend = Literal["fast", "reference"]
@@ -387,11 +393,15 @@ class OrientationFilter(ABC):
                 "orientation (all zero-norm or saturated); start the run where the "
                 "accelerometer works, or call reset(quat) with a known orientation"
             )
+        # the window's samples turned into the frame before the first sample, so motion
+        # during the window does not bias the start
+        acc = rotate_to_first_frame(inputs.gyr[:k], inputs.dt[:k], inputs.acc[:k])
         both = acc_ok & inputs.use_mag[:k]
         if both.any():
-            self.reinitialize(inputs.acc[:k][both], inputs.mag[:k][both])
+            mag = rotate_to_first_frame(inputs.gyr[:k], inputs.dt[:k], inputs.mag[:k])
+            self.reinitialize(acc[both], mag[both])
         else:
-            self.reinitialize(inputs.acc[:k][acc_ok])
+            self.reinitialize(acc[acc_ok])
 
     def _measure_dip(self, inputs: FilterInputs) -> None:
         """Dip from the first usable (acc, mag) pairs: it does not depend on the orientation."""
