@@ -266,3 +266,50 @@ class PoseSeries:
     @property
     def n_samples(self) -> int:
         return int(self.time.shape[0])
+
+
+@dataclass(frozen=True)
+class JointAngleSeries:
+    """Joint coordinates over time: the meeting point of the IMU and marker pipelines.
+
+    Attributes:
+        time: (N,) [s].
+        names: k coordinate names. Human joints use OpenSim's coordinate names
+            (``hip_flexion_r``, ``knee_angle_r``, ``arm_flex_r``, ``elbow_flex_r``,
+            ``pro_sup_r``...); robot joints use the robot model's joint names.
+        values: (N, k) [rad] for rotational coordinates ([m] for translational ones).
+            NaN marks a frame where a coordinate is unknown (a sensor dropped out).
+    """
+
+    time: FloatArray
+    names: tuple[str, ...]
+    values: FloatArray
+    name: str = "joints"
+
+    def __post_init__(self) -> None:
+        time = as_float_array(self.time, f"{self.name}.time")
+        _check_time(time, self.name)
+        names = tuple(str(s) for s in self.names)
+        if len(set(names)) != len(names):
+            dup = sorted({s for s in names if names.count(s) > 1})
+            raise DataError(f"{self.name}.names: duplicated coordinate name(s) {', '.join(dup)}")
+        values = as_float_array(self.values, f"{self.name}.values")
+        check_shape(values, f"{self.name}.values", time.shape[0], len(names))
+        if np.isinf(values).any():
+            i = int(np.argwhere(np.isinf(values))[0][0])
+            raise DataError(f"{self.name}.values: infinite value at sample {i}")
+        object.__setattr__(self, "time", _frozen(time))
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "values", _frozen(values))
+
+    def column(self, name: str) -> FloatArray:
+        """One coordinate over time; the error lists the available names."""
+        if name not in self.names:
+            raise DataError(
+                f"{self.name}: no coordinate {name!r}; available: {', '.join(self.names)}"
+            )
+        return self.values[:, self.names.index(name)]
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.time.shape[0])
