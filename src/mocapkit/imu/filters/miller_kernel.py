@@ -21,24 +21,22 @@ _M_REF = np.array([0.0, 1.0, 0.0])
 
 @njit(cache=True)
 def _law_of_cosines_angle(local: np.ndarray, sensed: np.ndarray, axis: int) -> float:
-    p_local = local.copy()
-    p_local[axis] = 0.0
-    p_sensed = sensed.copy()
-    p_sensed[axis] = 0.0
-    e0 = p_local[0] - p_sensed[0]
-    e1 = p_local[1] - p_sensed[1]
-    e2 = p_local[2] - p_sensed[2]
-    a = math.sqrt(p_local[0] * p_local[0] + p_local[1] * p_local[1] + p_local[2] * p_local[2])
-    b = math.sqrt(p_sensed[0] * p_sensed[0] + p_sensed[1] * p_sensed[1] + p_sensed[2] * p_sensed[2])
-    c = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+    """Scalar form of ``miller.law_of_cosines_angle``: the projections onto the plane
+    normal to ``axis`` are the components ``i, j`` (cyclic order)."""
+    i = (axis + 1) % 3
+    j = (axis + 2) % 3
+    li, lj = local[i], local[j]
+    si, sj = sensed[i], sensed[j]
+    ei = li - si
+    ej = lj - sj
+    a = math.sqrt(li * li + lj * lj)
+    b = math.sqrt(si * si + sj * sj)
+    c = math.sqrt(ei * ei + ej * ej)
     if a < _MIN_PROJECTION or b < _MIN_PROJECTION:
         return 0.0
     cos_angle = min(1.0, max(-1.0, (a * a + b * b - c * c) / (2.0 * a * b)))
     angle = math.acos(cos_angle)
-    i = (axis + 1) % 3
-    j = (axis + 2) % 3
-    cross_k = p_local[i] * p_sensed[j] - p_local[j] * p_sensed[i]
-    return angle if cross_k >= 0.0 else -angle
+    return angle if li * sj - lj * si >= 0.0 else -angle
 
 
 @njit(cache=True)
