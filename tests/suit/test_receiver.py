@@ -315,3 +315,17 @@ def test_bundle_entry_outside_the_allow_list_drops_only_that_entry() -> None:
     _feed(rx, encode_bundle(0, 0, [(1, q), (9, q), (2, q)]))
     assert [s.sensor_id for s in _drain(rx)] == [1, 2]
     assert rx.stats().dropped == {"unknown_sensor": 1}
+
+
+def test_rate_limit_can_be_turned_off_for_fast_replays() -> None:
+    import math
+
+    limited = _rx(queue_per_sensor=30_000)
+    free = _rx(source_rate_hz=math.inf, queue_per_sensor=30_000)
+    for seq in range(21_000):
+        pkt = _raw(1, seq)
+        _feed(limited, pkt, t_ns=0)
+        _feed(free, pkt, t_ns=0)
+    assert limited.stats().dropped == {"rate_limited": 1_000}  # the 20 000 burst, then none
+    assert free.stats().dropped == {}
+    assert free.stats().sensors[1].delivered == 21_000

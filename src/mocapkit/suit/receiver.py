@@ -68,6 +68,7 @@ class Receiver:
         self._log_suppressed: dict[str, int] = {}
         self._slime_ids: dict[tuple[Any, int], int] = {}
         self._slime_last: dict[Any, int] = {}
+        self._rate_limited = math.isfinite(self.cfg.source_rate_hz)
         self._last_check = 0.0
         self._pending_count = 0
 
@@ -127,7 +128,7 @@ class Receiver:
         st.bytes += len(data)
         if self.recorder is not None:
             self.recorder.write_frame(data, now_ns, source)
-        if not self._admit(source, now_ns):
+        if self._rate_limited and not self._admit(source, now_ns):
             self._drop(
                 "rate_limited", f"source {source} exceeds {self.cfg.source_rate_hz:.0f} packets/s"
             )

@@ -34,7 +34,9 @@ class ReceiverConfig:
         missing_after_s: a sensor silent this long is "missing" [s].
         stale_after_s: a sensor that keeps sending but brings nothing new this long (only
             duplicates, or a sensor clock that does not advance: a frozen node) is "stale" [s].
-        source_rate_hz, source_burst: token bucket per source address [packets/s, packets].
+        source_rate_hz, source_burst: token bucket per source address [packets/s, packets];
+            ``math.inf`` turns it off (a file replayed as fast as possible is one source
+            far above any live rate).
         queue_per_sensor: bounded queue length per sensor (oldest dropped when full).
     """
 
