@@ -21,6 +21,7 @@ from mocapkit.errors import MissingDependencyError, MocapkitError
 _COMMAND_MODULES: tuple[str, ...] = (
     "mocapkit.cli.demo_cmd",
     "mocapkit.cli.imu_cmd",
+    "mocapkit.cli.suit_cmd",
     "mocapkit.cli.teleop_cmd",
 )
 
