@@ -19,7 +19,7 @@ mounting so that at calibration every segment has the orientation the pose presc
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -115,6 +115,10 @@ class BodyCalibration:
         method: ``"pose"`` or ``"functional"``.
         pose: the pose's coordinates [rad].
         window: (t0, t1) [s] of the calibration samples.
+        ground_heading_rad: heading of the root joints' reference frame ``ground``:
+            ``heading_rad`` (default, ``root_reference="body"``: ``pelvis_rotation`` is 0
+            at calibration) or 0 (``"world"``: relative to world x, OpenSense IK's
+            convention).
     """
 
     tree_name: str
@@ -124,10 +128,20 @@ class BodyCalibration:
     pose: dict[str, float] = field(default_factory=dict)
     window: tuple[float, float] = (0.0, 0.0)
     diagnostics: dict[str, Any] = field(default_factory=dict)
+    ground_heading_rad: float | None = None
 
     @property
     def q_world_ground(self) -> FloatArray:
-        return q_world_ground(self.heading_rad)
+        """(4,) the root joints' reference frame in the world."""
+        psi = self.heading_rad if self.ground_heading_rad is None else self.ground_heading_rad
+        return q_world_ground(psi)
+
+    def with_root_reference(self, root_reference: str) -> BodyCalibration:
+        """``"body"``: root angles relative to the body at calibration; ``"world"``:
+        relative to the world's x axis (OpenSense IK)."""
+        if root_reference not in ("body", "world"):
+            raise ConfigError(f"root_reference: expected 'body' or 'world', got {root_reference!r}")
+        return replace(self, ground_heading_rad=None if root_reference == "body" else 0.0)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary (angles in rad, quaternions [w, x, y, z])."""
@@ -137,6 +151,7 @@ class BodyCalibration:
             "heading_rad": self.heading_rad,
             "pose_rad": dict(self.pose),
             "window_s": list(self.window),
+            "ground_heading_rad": self.ground_heading_rad,
             "segments": {
                 name: {
                     "sensor": c.sensor,
@@ -170,6 +185,11 @@ class BodyCalibration:
                 pose={str(k): float(v) for k, v in data.get("pose_rad", {}).items()},
                 window=(window[0], window[1]),
                 diagnostics=dict(data.get("diagnostics", {})),
+                ground_heading_rad=(
+                    None
+                    if data.get("ground_heading_rad") is None
+                    else float(data["ground_heading_rad"])
+                ),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise ConfigError(f"calibration: malformed dictionary ({exc!r})") from exc

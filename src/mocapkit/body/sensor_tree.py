@@ -156,7 +156,7 @@ class SegmentSpec:
         joint: the joint between the parent and this segment.
         offset: (3,) [m] position of this segment's joint in the parent frame at zero pose
             (skeleton drawing and BVH only).
-        length: [m] length along -y of a segment without children (BVH end site).
+        end: (3,) [m] the segment's far end in its own frame (BVH end site of a leaf).
         functional: how automatic calibration may find this segment's z (flexion) axis:
             ``"flexion"`` (dominant rotation axis in motion) or ``"none"``.
     """
@@ -166,15 +166,20 @@ class SegmentSpec:
     sensor: str
     joint: JointSpec
     offset: FloatArray = field(default_factory=lambda: np.zeros(3))
-    length: float = 0.1
+    end: FloatArray = field(default_factory=lambda: np.array([0.0, -0.1, 0.0]))
     functional: str = "none"
 
     def __post_init__(self) -> None:
         offset = np.array(self.offset, dtype=np.float64).reshape(-1)
         if offset.shape != (3,) or not np.all(np.isfinite(offset)):
             raise ConfigError(f"segment {self.name!r}: offset must be [x, y, z] in metres")
+        end = np.array(self.end, dtype=np.float64).reshape(-1)
+        if end.shape != (3,) or not np.all(np.isfinite(end)):
+            raise ConfigError(f"segment {self.name!r}: end must be [x, y, z] in metres")
         offset.setflags(write=False)
+        end.setflags(write=False)
         object.__setattr__(self, "offset", offset)
+        object.__setattr__(self, "end", end)
         if self.functional not in ("flexion", "none"):
             raise ConfigError(
                 f"segment {self.name!r}: functional must be 'flexion' or 'none', "
@@ -253,7 +258,7 @@ class SensorTree:
                     sensor=str(entry.get("sensor", entry["name"])),
                     joint=joint,
                     offset=np.asarray(entry.get("offset", [0.0, 0.0, 0.0]), dtype=np.float64),
-                    length=float(entry.get("length", 0.1)),
+                    end=np.asarray(entry.get("end", [0.0, -0.1, 0.0]), dtype=np.float64),
                     functional=str(entry.get("functional", "none")),
                 )
             )
@@ -299,7 +304,7 @@ class SensorTree:
                     "parent": s.parent,
                     "sensor": s.sensor,
                     "offset": s.offset.tolist(),
-                    "length": s.length,
+                    "end": s.end.tolist(),
                     "functional": s.functional,
                     "joint": {
                         "name": j.name,
