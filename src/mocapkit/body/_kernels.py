@@ -24,7 +24,7 @@ def _wrap(a: float) -> float:
 
 
 @njit(cache=True, inline="always")
-def _mul(a, b, out):  # type: ignore[no-untyped-def]
+def _mul(a, b, out):
     """out = a * b (Hamilton); out may not alias a or b."""
     w1, x1, y1, z1 = a[0], a[1], a[2], a[3]
     w2, x2, y2, z2 = b[0], b[1], b[2], b[3]
@@ -35,7 +35,7 @@ def _mul(a, b, out):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, inline="always")
-def _conj_mul(a, b, out):  # type: ignore[no-untyped-def]
+def _conj_mul(a, b, out):
     """out = conj(a) * b."""
     w1, x1, y1, z1 = a[0], -a[1], -a[2], -a[3]
     w2, x2, y2, z2 = b[0], b[1], b[2], b[3]
@@ -46,7 +46,7 @@ def _conj_mul(a, b, out):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def euler_xyz_intrinsic(q, out):  # type: ignore[no-untyped-def]
+def euler_xyz_intrinsic(q, out):
     """Intrinsic XYZ angles of unit q into out (3,); returns True in gimbal lock
     (then the third angle is 0, as in mocapkit.geometry.euler_from_quat)."""
     n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
@@ -75,7 +75,7 @@ def euler_xyz_intrinsic(q, out):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def frame_kernel(  # type: ignore[no-untyped-def]
+def frame_kernel(
     q_in, t, mount, heading, q_b, parents, q_wg, signs, offsets, seg_idx, ang_idx,
     hold, max_hold, near_limit,
     last_q, last_t, cont, have_prev, last_third,
@@ -155,7 +155,7 @@ def frame_kernel(  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def batch_kernel(  # type: ignore[no-untyped-def]
+def batch_kernel(
     q_in, time, mount, heading, q_b, parents, q_wg, signs, offsets, seg_idx, ang_idx,
     hold, max_hold, near_limit,
     last_q, last_t, cont, have_prev, last_third,

@@ -312,7 +312,7 @@ def find_still_window(
     rates = np.stack([np.linalg.norm(angular_rate(series[n]), axis=1) for n in names])
     rates = np.nan_to_num(rates, nan=np.inf)
     rate_hz = 1.0 / float(np.median(np.diff(time)))
-    k = max(1, int(round(0.1 * rate_hz)))
+    k = max(1, round(0.1 * rate_hz))
     if k > 1:
         from scipy.ndimage import median_filter
 
@@ -320,7 +320,7 @@ def find_still_window(
     still = (rates < rate_threshold).all(axis=0)
     if start_s is not None:
         still &= time >= start_s
-    n = max(2, int(round(duration_s * rate_hz)))
+    n = max(2, round(duration_s * rate_hz))
     run = np.convolve(still.astype(np.int64), np.ones(n, dtype=np.int64), mode="valid")
     hits = np.flatnonzero(run == n)
     if hits.size == 0:

@@ -61,7 +61,9 @@ MIN_AXIS_FROM_UP_DEG = 45.0
 SMOOTH_S = 0.1
 
 
-def dominant_axis(rate: FloatArray, min_rate: float = 0.5, smooth: int = 1) -> tuple[FloatArray, float, int]:
+def dominant_axis(
+    rate: FloatArray, min_rate: float = 0.5, smooth: int = 1
+) -> tuple[FloatArray, float, int]:
     """Principal axis (3,) of angular rates (N, 3) [rad/s], its share of the rotation
     energy (largest eigenvalue / trace) and the number of samples used.
 
@@ -81,7 +83,10 @@ def dominant_axis(rate: FloatArray, min_rate: float = 0.5, smooth: int = 1) -> t
 
 
 def mounting_from_two_axes(
-    up_sensor: FloatArray, lateral_sensor: FloatArray, up_segment: FloatArray, lateral_segment: FloatArray
+    up_sensor: FloatArray,
+    lateral_sensor: FloatArray,
+    up_segment: FloatArray,
+    lateral_segment: FloatArray,
 ) -> FloatArray:
     """``q_sensor_segment`` mapping ``up_segment`` exactly onto ``up_sensor`` and
     ``lateral_segment`` onto the part of ``lateral_sensor`` perpendicular to it (TRIAD)."""
@@ -132,7 +137,9 @@ def calibrate_functional(
             calibration (6D filters with unrelated headings).
     """
     if heading_alignment not in ("shared", "pose"):
-        raise ConfigError(f"heading_alignment: expected 'shared' or 'pose', got {heading_alignment!r}")
+        raise ConfigError(
+            f"heading_alignment: expected 'shared' or 'pose', got {heading_alignment!r}"
+        )
     tree.check_sensors(list(orientations))
     coords = pose_coordinates(tree, pose)
     q_ground_seg = compose_pose(tree, coords)
@@ -155,7 +162,7 @@ def calibrate_functional(
         else:
             use = np.zeros(s.n_samples, dtype=bool)
             use[window_indices(s.time, motion_window)] = True
-        smooth = max(1, int(round(SMOOTH_S / float(np.median(np.diff(s.time))))))
+        smooth = max(1, round(SMOOTH_S / float(np.median(np.diff(s.time)))))
         axis, share, n_used = dominant_axis(rate[use], smooth=smooth)
         up_sensor = quat_rotate(quat_conj(q_cal[seg.sensor]), e_z)
         d["functional_share"] = share
@@ -169,7 +176,9 @@ def calibrate_functional(
         up_seg = quat_rotate(quat_conj(q_ground_seg[i]), e_y)
         lat_seg = quat_rotate(quat_conj(q_ground_seg[i]), e_z)
         mount = mounting_from_two_axes(up_sensor, axis, up_seg, lat_seg)
-        fwd = quat_rotate(q_cal[seg.sensor], quat_rotate(mount, quat_rotate(quat_conj(q_ground_seg[i]), e_x)))
+        fwd = quat_rotate(
+            q_cal[seg.sensor], quat_rotate(mount, quat_rotate(quat_conj(q_ground_seg[i]), e_x))
+        )
         cand[seg.name] = (mount, float(np.arctan2(fwd[1], fwd[0])))
 
     # body heading psi

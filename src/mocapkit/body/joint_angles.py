@@ -87,7 +87,9 @@ def compose_pose(tree: SensorTree, coordinates: Mapping[str, float]) -> FloatArr
     return out
 
 
-def relative_rotations(q_world_segment: FloatArray, parents: np.ndarray, q_world_ground: FloatArray) -> FloatArray:
+def relative_rotations(
+    q_world_segment: FloatArray, parents: np.ndarray, q_world_ground: FloatArray
+) -> FloatArray:
     """(N, S, 4) ``q_parent_child`` from (N, S, 4) world orientations (NaN propagates)."""
     q_parent = np.where(
         (parents < 0)[None, :, None],
@@ -154,7 +156,9 @@ class BodyAngles:
     held: dict[str, int] = field(default_factory=dict)
 
 
-def report_gimbal(tree: SensorTree, gimbal: np.ndarray, near: np.ndarray, time: FloatArray) -> tuple[dict[str, np.ndarray], dict[str, int]]:
+def report_gimbal(
+    tree: SensorTree, gimbal: np.ndarray, near: np.ndarray, time: FloatArray
+) -> tuple[dict[str, np.ndarray], dict[str, int]]:
     """Collect and log gimbal-lock samples per joint; the warning names the fix."""
     exact: dict[str, np.ndarray] = {}
     close: dict[str, int] = {}
@@ -189,7 +193,7 @@ def decompose(
     q_b, _, _ = joint_tables(tree)
     q_rel = relative_rotations(q_world_segment, tree.parent_index, q_world_ground)
     q_joint = quat_mul(quat_mul(quat_conj(q_b)[None], q_rel), q_b[None])
-    valid = np.isfinite(q_joint).all(axis=-1)
+    valid: np.ndarray = np.isfinite(q_joint).all(axis=-1)
     safe = np.where(valid[..., None], q_joint, np.array([1.0, 0.0, 0.0, 0.0]))
     angles, gimbal = euler_from_quat(safe, "XYZ", return_gimbal=True)
     angles = np.where(valid[..., None], angles, np.nan)

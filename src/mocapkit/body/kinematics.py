@@ -78,7 +78,9 @@ class BodyStream:
         if dropout not in ("nan", "hold"):
             raise ConfigError(f"dropout: expected 'nan' or 'hold', got {dropout!r}")
         if not (np.isfinite(max_hold_s) and max_hold_s >= 0):
-            raise ConfigError(f"max_hold_s: expected a non-negative time in seconds, got {max_hold_s}")
+            raise ConfigError(
+                f"max_hold_s: expected a non-negative time in seconds, got {max_hold_s}"
+            )
         calib.check_tree(tree)
         self.tree = tree
         self.calib = calib
@@ -165,8 +167,8 @@ class BodyStream:
         q = np.asarray(q_world_sensor, dtype=np.float64)
         if q.shape != self._in.shape:
             raise ConfigError(
-                f"q_world_sensor: expected shape {self._in.shape} (sensors {', '.join(self.sensor_names)}), "
-                f"got {q.shape}"
+                f"q_world_sensor: expected shape {self._in.shape} (sensors "
+                f"{', '.join(self.sensor_names)}), got {q.shape}"
             )
         self._in[...] = q
         return self._run_frame(t)
@@ -188,7 +190,9 @@ class BodyStream:
         return [c for c, v in zip(self.coordinate_names, self.angles, strict=True) if v != v]
 
     # -- batch ------------------------------------------------------------------------------------
-    def run(self, time: Any, q_world_sensor: Any) -> tuple[FloatArray, FloatArray, dict[str, np.ndarray]]:
+    def run(
+        self, time: Any, q_world_sensor: Any
+    ) -> tuple[FloatArray, FloatArray, dict[str, np.ndarray]]:
         """Frames (N,) [s] and (N, S, 4) -> joint angles (N, K), segment orientations
         (N, S, 4) and per-frame flags ``{"stale", "gimbal", "near_gimbal"}`` (N, S),
         continuing from the current state (``run(a); run(b)`` equals ``run(a + b)``)."""
@@ -244,7 +248,8 @@ def body_angles(
     stream = BodyStream(tree, calib, dropout="nan")
     values, q_seg, flags = stream.run(time, q_sensor)
     segments = {
-        s.name: OrientationSeries(time, q_seg[:, i], name=s.name) for i, s in enumerate(tree.segments)
+        s.name: OrientationSeries(time, q_seg[:, i], name=s.name)
+        for i, s in enumerate(tree.segments)
     }
     exact, close = report_gimbal(tree, flags["gimbal"], flags["near_gimbal"], time)
     coords = tree.coordinate_names

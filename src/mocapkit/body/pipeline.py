@@ -36,7 +36,9 @@ class BodyResult:
     segments: dict[str, OrientationSeries]
 
 
-def crop(series: Mapping[str, OrientationSeries], start: float | None, stop: float | None) -> dict[str, OrientationSeries]:
+def crop(
+    series: Mapping[str, OrientationSeries], start: float | None, stop: float | None
+) -> dict[str, OrientationSeries]:
     """Samples with ``start <= t <= stop`` of every series."""
     out = {}
     for k, s in series.items():
@@ -72,7 +74,9 @@ def calibrate(
     ``window`` (default: the first still window), with ``heading`` (default: world x).
     """
     if calibration not in CALIBRATIONS:
-        raise ConfigError(f"calibration: expected one of {', '.join(CALIBRATIONS)}, got {calibration!r}")
+        raise ConfigError(
+            f"calibration: expected one of {', '.join(CALIBRATIONS)}, got {calibration!r}"
+        )
     if window is None:
         window = find_still_window(orientations, still_duration_s)
     if calibration == "auto":
@@ -124,7 +128,9 @@ def run_body(
                 t0 = float(source[tree.segments[0].sensor].time[0])
                 window = (t0, t0)
         cal = calibrate(tree, source, calibration=calibration, window=window, **calibrate_kwargs)
-    body, segments = body_angles(tree, cal, use, dropout=dropout, max_hold_s=max_hold_s, backend=backend)
+    body, segments = body_angles(
+        tree, cal, use, dropout=dropout, max_hold_s=max_hold_s, backend=backend
+    )
     return BodyResult(cal, body, segments)
 
 

@@ -17,7 +17,9 @@ from mocapkit.series import OrientationSeries
 DROPOUT_POLICIES = ("nan", "hold")
 
 
-def hold_last_valid(quat: FloatArray, time: FloatArray, max_hold_s: float) -> tuple[FloatArray, np.ndarray]:
+def hold_last_valid(
+    quat: FloatArray, time: FloatArray, max_hold_s: float
+) -> tuple[FloatArray, np.ndarray]:
     """Fill NaN rows of (N, 4) with the last valid row while the gap is at most
     ``max_hold_s`` old; returns the filled copy and the (N,) mask of held rows."""
     out = quat.copy()
@@ -72,7 +74,9 @@ def sensor_array(
     return time, q, held
 
 
-def apply_calibration(tree: SensorTree, calib: BodyCalibration, q_world_sensor: FloatArray) -> FloatArray:
+def apply_calibration(
+    tree: SensorTree, calib: BodyCalibration, q_world_sensor: FloatArray
+) -> FloatArray:
     """(N, S, 4) ``q_world_segment = q_heading * q_world_sensor * q_sensor_segment``."""
     calib.check_tree(tree)
     mount = np.stack([calib.segments[s.name].q_sensor_segment for s in tree.segments])

@@ -70,7 +70,9 @@ class JointSpec:
             )
         axes = np.array(self.axes, dtype=np.float64)
         if axes.ndim != 2 or axes.shape[1] != 3 or axes.shape[0] not in (2, 3):
-            raise ConfigError(f"{where}: axes must be 2 or 3 vectors [x, y, z], got {axes.tolist()}")
+            raise ConfigError(
+                f"{where}: axes must be 2 or 3 vectors [x, y, z], got {axes.tolist()}"
+            )
         norms = np.linalg.norm(axes, axis=1)
         if np.any(~np.isfinite(norms)) or np.any(norms < 1e-9):
             raise ConfigError(f"{where}: axes must be finite non-zero vectors, got {axes.tolist()}")
@@ -91,10 +93,10 @@ class JointSpec:
         if order is None:
             two = coords[1] is not None and coords[2] is None
             order = (0, 2, 1) if two else (0, 1, 2)
-        order = tuple(int(o) for o in order)
-        if sorted(order) != [0, 1, 2]:
-            raise ConfigError(f"{where}: order must be a permutation of 0, 1, 2, got {list(order)}")
-        object.__setattr__(self, "order", order)
+        perm = tuple(int(o) for o in order)
+        if sorted(perm) != [0, 1, 2]:
+            raise ConfigError(f"{where}: order must be a permutation of 0, 1, 2, got {list(perm)}")
+        object.__setattr__(self, "order", (perm[0], perm[1], perm[2]))
         for arr in (axes, signs, offsets):
             arr.setflags(write=False)
         object.__setattr__(self, "coordinates", coords)
@@ -245,11 +247,11 @@ class SensorTree:
             offsets_deg = j.get("offsets_deg", [0.0, 0.0, 0.0])
             joint = JointSpec(
                 name=str(j.get("name", entry["name"])),
-                coordinates=tuple(j.get("coordinates", (None, None, None))),  # type: ignore[arg-type]
+                coordinates=tuple(j.get("coordinates", (None, None, None))),
                 axes=np.asarray(j.get("axes", []), dtype=np.float64),
                 signs=np.asarray(j.get("signs", [1.0, 1.0, 1.0]), dtype=np.float64),
                 offsets=np.deg2rad(np.asarray(offsets_deg, dtype=np.float64)),
-                order=tuple(j["order"]) if "order" in j else None,  # type: ignore[arg-type]
+                order=tuple(j["order"]) if "order" in j else None,
             )
             segments.append(
                 SegmentSpec(
@@ -366,7 +368,8 @@ class SensorTree:
             if s.name == name:
                 return s
         raise ConfigError(
-            f"tree {self.name!r}: no segment {name!r}; segments are: {', '.join(self.segment_names)}"
+            f"tree {self.name!r}: no segment {name!r}; segments are: "
+            f"{', '.join(self.segment_names)}"
         )
 
     def segment_of_sensor(self, sensor: str) -> SegmentSpec:

@@ -61,7 +61,8 @@ def bvh_from_segments(
     unknown = sorted(set(names) - set(tree.segment_names))
     if unknown:
         raise ConfigError(
-            f"bone_names: unknown segment(s) {', '.join(unknown)}; segments: {', '.join(tree.segment_names)}"
+            f"bone_names: unknown segment(s) {', '.join(unknown)}; segments: "
+            f"{', '.join(tree.segment_names)}"
         )
     bone = [names.get(s.name, s.name) for s in tree.segments]
     roots = [i for i, s in enumerate(tree.segments) if s.parent == GROUND]
@@ -76,12 +77,12 @@ def bvh_from_segments(
         joints.append(BvhJoint("Ground", -1, np.zeros(3), POSITION_CHANNELS + ROTATION_CHANNELS))
         columns.append(np.zeros((len(time), 6)))
         offset_root = 1
-    index = {}
+    index: dict[int, int] = {}
     children = {i: [k for k in range(len(parents)) if parents[k] == i] for i in range(len(parents))}
     for i, seg in enumerate(tree.segments):  # parents come first in the tree: valid BVH order
         p = parents[i]
         rel = q_g[:, i] if p < 0 else quat_mul(quat_conj(q_g[:, p]), q_g[:, i])
-        valid = np.isfinite(rel).all(axis=1)
+        valid: np.ndarray = np.isfinite(rel).all(axis=1)
         safe = np.where(valid[:, None], rel, np.array([1.0, 0.0, 0.0, 0.0]))
         euler = np.rad2deg(euler_from_quat(safe, _SEQ))
         euler[~valid] = np.nan

@@ -12,7 +12,9 @@ from mocapkit.geometry import quat_slerp
 from mocapkit.series import OrientationSeries
 
 
-def common_time(series: Mapping[str, OrientationSeries], rate_hz: float | None = None) -> FloatArray:
+def common_time(
+    series: Mapping[str, OrientationSeries], rate_hz: float | None = None
+) -> FloatArray:
     """A time grid covered by every series: from the latest start to the earliest end.
 
     The rate is ``rate_hz`` or the median rate of the inputs.
@@ -58,8 +60,8 @@ def align_orientations(
 ) -> dict[str, OrientationSeries]:
     """Every series on one common time grid (:func:`common_time`)."""
     times = [s.time for s in series.values()]
-    if times and all(t.shape == times[0].shape and np.array_equal(t, times[0]) for t in times):
-        if rate_hz is None:
-            return dict(series)
+    same = all(t.shape == times[0].shape and np.array_equal(t, times[0]) for t in times)
+    if times and same and rate_hz is None:
+        return dict(series)
     t = common_time(series, rate_hz)
     return {k: resample_orientation(s, t) for k, s in series.items()}

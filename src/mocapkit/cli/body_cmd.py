@@ -1,7 +1,7 @@
 """``mocapkit body``: sensor orientations -> calibrated segment orientations and joint angles.
 
-    mocapkit body presets [--json]
-    mocapkit body angles RECORDING --preset full_body_15 -o angles.mot [--bvh body.bvh] --json
+mocapkit body presets [--json]
+mocapkit body angles RECORDING --preset full_body_15 -o angles.mot [--bvh body.bvh] --json
 """
 
 from __future__ import annotations
@@ -59,7 +59,7 @@ def _parse_map(items: list[str]) -> dict[str, str]:
 def _cmd_presets(args: argparse.Namespace) -> int:
     from mocapkit.body.sensor_tree import SensorTree
 
-    info = {}
+    info: dict[str, dict[str, Any]] = {}
     for name in SensorTree.preset_names():
         tree = SensorTree.preset(name)
         info[name] = {
@@ -146,7 +146,8 @@ def _cmd_angles(args: argparse.Namespace) -> int:
         cal = report["calibration"]
         print(
             f"{tree.name}: {report['n_frames']} frames at {report['rate_hz']:.1f} Hz, "
-            f"calibration {cal['method']} (heading {cal['heading_deg']:.1f} deg) in {elapsed:.2f} s",
+            f"calibration {cal['method']} (heading {cal['heading_deg']:.1f} deg) "
+            f"in {elapsed:.2f} s",
             file=sys.stderr,
         )
         for name, c in report["coordinates"].items():
@@ -177,14 +178,19 @@ def register(subparsers: Any) -> None:
     tree.add_argument("--preset", default="full_body_15", help="built-in tree (see 'body presets')")
     tree.add_argument("--tree", help="sensor tree YAML file")
     a.add_argument("--map", action="append", metavar="SEGMENT=SENSOR", help="rename a sensor")
-    a.add_argument("--calibration", default="auto",
-                   choices=("auto", "npose", "tpose", "anatomical", "connectors_up"),
-                   help="auto: mountings and heading from a still window and the motion")  # fmt: skip
+    a.add_argument(
+        "--calibration",
+        default="auto",
+        choices=("auto", "npose", "tpose", "anatomical", "connectors_up"),
+        help="auto: mountings and heading from a still window and the motion",
+    )
     a.add_argument("--calib-window", nargs=2, type=float, metavar=("T0", "T1"))
     a.add_argument("--placement", help="separate calibration recording (OpenSense placement .sto)")
     a.add_argument("--heading-sensor", help="sensor whose --heading-axis points forward")
     a.add_argument("--heading-axis", default="x", help="x, y, z, -x, -y or -z")
-    a.add_argument("--heading-deg", type=float, help="body heading at calibration [deg from world x]")
+    a.add_argument(
+        "--heading-deg", type=float, help="body heading at calibration [deg from world x]"
+    )
     a.add_argument("--heading-alignment", choices=("shared", "pose"), default="shared")
     a.add_argument("--root-reference", choices=("body", "world"), default="body")
     a.add_argument("--dropout", choices=("nan", "hold"), default="nan")

@@ -75,12 +75,19 @@ def _check(motion: BvhMotion) -> None:
     names = [j.name for j in motion.joints]
     for i, j in enumerate(motion.joints):
         if not j.name or any(c.isspace() for c in j.name):
-            raise ShapeError(f"joints[{i}]: BVH joint names cannot be empty or contain spaces: {j.name!r}")
+            raise ShapeError(
+                f"joints[{i}]: BVH joint names cannot be empty or contain spaces: {j.name!r}"
+            )
         bad = [c for c in j.channels if c not in _VALID_CHANNELS]
         if bad:
-            raise ShapeError(f"joint {j.name!r}: unknown channel(s) {bad}; use {sorted(_VALID_CHANNELS)}")
+            raise ShapeError(
+                f"joint {j.name!r}: unknown channel(s) {bad}; use {sorted(_VALID_CHANNELS)}"
+            )
         if (i == 0) != (j.parent < 0) or j.parent >= i:
-            raise ShapeError(f"joint {j.name!r}: the first joint must be the only root and parents must come first")
+            raise ShapeError(
+                f"joint {j.name!r}: the first joint must be the only root and parents "
+                "must come first"
+            )
     if len(set(names)) != len(names):
         raise ShapeError(f"joint names must be unique, got {names}")
 
@@ -89,7 +96,9 @@ def write_bvh(path: str | Path, motion: BvhMotion, precision: int = 6) -> Path:
     """Write ``motion`` to ``path``; returns the path."""
     _check(motion)
     if not (np.isfinite(motion.frame_time) and motion.frame_time > 0):
-        raise ShapeError(f"frame_time: expected a positive time in seconds, got {motion.frame_time}")
+        raise ShapeError(
+            f"frame_time: expected a positive time in seconds, got {motion.frame_time}"
+        )
     if not np.isfinite(motion.values).all():
         bad = int(np.argwhere(~np.isfinite(motion.values))[0][0])
         raise ShapeError(
@@ -162,7 +171,9 @@ def read_bvh(path: str | Path) -> BvhMotion:
                 else:
                     stack.pop()
         except (IndexError, ValueError) as exc:
-            raise FileFormatError(f"{p}: malformed hierarchy line {' '.join(tok)!r} ({exc})") from exc
+            raise FileFormatError(
+                f"{p}: malformed hierarchy line {' '.join(tok)!r} ({exc})"
+            ) from exc
         i += 1
     if i >= len(lines):
         raise FileFormatError(f"{p}: no MOTION section")
@@ -170,20 +181,31 @@ def read_bvh(path: str | Path) -> BvhMotion:
         n_frames = int(lines[i + 1][1])
         frame_time = float(lines[i + 2][2])
     except (IndexError, ValueError) as exc:
-        raise FileFormatError(f"{p}: expected 'Frames: n' and 'Frame Time: dt' after MOTION") from exc
+        raise FileFormatError(
+            f"{p}: expected 'Frames: n' and 'Frame Time: dt' after MOTION"
+        ) from exc
     rows = lines[i + 3 : i + 3 + n_frames]
     n_ch = sum(len(j["channels"]) for j in joints)
     if len(rows) != n_frames:
         raise FileFormatError(f"{p}: header says {n_frames} frames, file has {len(rows)}")
     try:
-        values = np.array([[float(v) for v in r] for r in rows], dtype=np.float64).reshape(n_frames, -1)
+        values = np.array([[float(v) for v in r] for r in rows], dtype=np.float64).reshape(
+            n_frames, -1
+        )
     except ValueError as exc:
         raise FileFormatError(f"{p}: non-numeric motion data ({exc})") from exc
     if values.shape[1] != n_ch and n_frames:
-        raise FileFormatError(f"{p}: {values.shape[1]} values per frame, hierarchy has {n_ch} channels")
+        raise FileFormatError(
+            f"{p}: {values.shape[1]} values per frame, hierarchy has {n_ch} channels"
+        )
     out = tuple(
-        BvhJoint(j["name"], j["parent"], j["offset"] if j["offset"] is not None else np.zeros(3),
-                 j["channels"], j["end"])  # fmt: skip
+        BvhJoint(
+            j["name"],
+            j["parent"],
+            j["offset"] if j["offset"] is not None else np.zeros(3),
+            j["channels"],
+            j["end"],
+        )
         for j in joints
     )
     return BvhMotion(out, frame_time, values.reshape(n_frames, n_ch), meta={"source": str(p)})
