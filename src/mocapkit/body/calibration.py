@@ -438,3 +438,42 @@ def calibrate_pose(
         window=(float(window[0]), float(window[1])),
         diagnostics={"pose": pose if isinstance(pose, str) else "custom"},
     )
+
+
+def reset_headings(
+    tree: SensorTree,
+    calib: BodyCalibration,
+    orientations: Mapping[str, OrientationSeries],
+    window: tuple[float, float],
+    *,
+    pose: str | Mapping[str, float] = "npose",
+    still_tolerance_deg: float = STILL_TOLERANCE_DEG,
+) -> BodyCalibration:
+    """Keep the mountings, re-estimate every sensor's heading correction ``q_heading`` so
+    that in ``pose`` (held still in ``window``) each segment faces the calibration's body
+    heading: the heading reset for sensors whose worlds have unrelated headings (6D
+    filters), any size of offset. Redo it at any time the headings have drifted."""
+    calib.check_tree(tree)
+    coords = pose_coordinates(tree, pose)
+    q_ground_seg = compose_pose(tree, coords)
+    q_wg = q_world_ground(calib.heading_rad)
+    segs = {}
+    for i, seg in enumerate(tree.segments):
+        s = orientations[seg.sensor]
+        q_cal, _ = still_orientation(s, window_indices(s.time, window), seg.sensor, still_tolerance_deg)
+        old = calib.segments[seg.name]
+        have = quat_rotate(quat_mul(q_cal, old.q_sensor_segment), np.array([1.0, 0.0, 0.0]))
+        want = quat_rotate(quat_mul(q_wg, q_ground_seg[i]), np.array([1.0, 0.0, 0.0]))
+        if np.hypot(have[0], have[1]) < 0.2 or np.hypot(want[0], want[1]) < 0.2:
+            raise CalibrationError(
+                f"sensor {seg.sensor!r} on {seg.name}: the segment's forward axis is near "
+                "vertical in this pose, so its heading cannot be reset from it; use a pose "
+                "with the segment upright (npose)"
+            )
+        delta = float(np.arctan2(want[1], want[0]) - np.arctan2(have[1], have[0]))
+        d = dict(old.diagnostics)
+        d["heading_reset_deg"] = float(np.rad2deg(np.angle(np.exp(1j * delta))))
+        segs[seg.name] = SegmentCalibration(
+            old.sensor, old.q_sensor_segment, yaw_quat(delta), d
+        )
+    return replace(calib, segments=segs)

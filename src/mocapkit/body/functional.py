@@ -5,10 +5,11 @@ Per segment, two directions known in the segment frame are measured in the senso
 
 - **up**: gravity in a still window (the calibration pose says where up is in each
   segment: ``q_ground_segment(pose)^-1 * y_ground``);
-- **lateral** (for segments marked ``functional: flexion``): the dominant rotation axis of
-  the sensor while the subject moves (principal axis of its angular rate, computed from
-  the orientations), which in gait and most everyday motion is the body's lateral axis
-  (hip, knee, ankle flexion, arm swing, head nodding).
+- **flexion axis** (for segments marked ``functional: flexion``): the dominant rotation
+  axis of the sensor while the subject moves (principal axis of its angular rate, computed
+  from the orientations) is taken to be the first axis of the segment's own joint (hip,
+  knee and ankle flexion, shoulder flexion, elbow flexion: in gait and most everyday
+  motion close to the body's lateral axis).
 
 The two give the mounting ``q_sensor_segment`` up to the sign of the lateral axis, and
 without using any world heading (so they hold for 6D filters whose headings are unrelated).
@@ -82,6 +83,16 @@ def dominant_axis(
     return vecs[:, -1], float(vals[-1] / max(vals.sum(), 1e-300)), len(r)
 
 
+def flexion_axis_in_segment(tree: SensorTree, q_ground_seg: FloatArray, i: int) -> FloatArray:
+    """(3,) the first axis of segment i's joint (hip, knee, ankle, shoulder flexion, elbow
+    axis), expressed in segment i's frame at the calibration pose: the direction its
+    dominant rotation is expected about."""
+    b1 = tree.segments[i].joint.frame[:, 0]  # in the parent frame
+    p = int(tree.parent_index[i])
+    in_ground = b1 if p < 0 else quat_rotate(q_ground_seg[p], b1)
+    return quat_rotate(quat_conj(q_ground_seg[i]), in_ground)
+
+
 def mounting_from_two_axes(
     up_sensor: FloatArray,
     lateral_sensor: FloatArray,
@@ -134,7 +145,9 @@ def calibrate_functional(
         heading_alignment: ``"shared"`` when the sensors share one world heading (9D, or
             a recording's own fused orientations); ``"pose"`` rotates each functionally
             calibrated sensor's world about z so its segment faces the body heading at
-            calibration (6D filters with unrelated headings).
+            calibration (6D filters whose headings differ, by up to +-90 deg from the
+            consensus: a larger offset cannot be told from a mounting turned round; with
+            known mountings use :func:`mocapkit.body.calibration.reset_headings`).
     """
     if heading_alignment not in ("shared", "pose"):
         raise ConfigError(
@@ -174,7 +187,7 @@ def calibrate_functional(
         if share < MIN_SHARE or from_up < MIN_AXIS_FROM_UP_DEG:
             continue
         up_seg = quat_rotate(quat_conj(q_ground_seg[i]), e_y)
-        lat_seg = quat_rotate(quat_conj(q_ground_seg[i]), e_z)
+        lat_seg = flexion_axis_in_segment(tree, q_ground_seg, i)
         mount = mounting_from_two_axes(up_sensor, axis, up_seg, lat_seg)
         fwd = quat_rotate(
             q_cal[seg.sensor], quat_rotate(mount, quat_rotate(quat_conj(q_ground_seg[i]), e_x))

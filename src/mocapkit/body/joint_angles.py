@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -61,29 +62,34 @@ def coordinate_slots(tree: SensorTree) -> tuple[np.ndarray, np.ndarray]:
     return np.array(seg, dtype=np.int64), np.array(ang, dtype=np.int64)
 
 
-def compose_pose(tree: SensorTree, coordinates: Mapping[str, float]) -> FloatArray:
-    """(S, 4) ``q_ground_segment`` of every segment for the given coordinates [rad]
-    (absent coordinates are zero; the inverse of the decomposition)."""
+def compose_pose(tree: SensorTree, coordinates: Mapping[str, Any]) -> FloatArray:
+    """``q_ground_segment`` of every segment for the given coordinates [rad]: (S, 4) for
+    scalar values, (N, S, 4) for arrays of N values (absent coordinates are zero). The
+    inverse of the decomposition."""
     unknown = sorted(set(coordinates) - set(tree.coordinate_names))
     if unknown:
         raise ConfigError(
             f"coordinates {', '.join(unknown)} are not in tree {tree.name!r}; its coordinates: "
             f"{', '.join(tree.coordinate_names)}"
         )
+    values = {k: np.asarray(v, dtype=np.float64) for k, v in coordinates.items()}
+    shape = np.broadcast_shapes(*(v.shape for v in values.values())) if values else ()
     q_b, signs, offsets = joint_tables(tree)
     parents = tree.parent_index
-    out = np.zeros((len(tree.segments), 4))
+    out = np.zeros((*shape, len(tree.segments), 4))
     for i, seg in enumerate(tree.segments):
         order = seg.joint.slots()[0]
-        angles = np.zeros(3)
+        angles = np.zeros((*shape, 3))
         for j in range(3):
             c = seg.joint.coordinates[order[j]]
             # an unreported coordinate is a zero angle (not a zero coordinate)
-            if c is not None:
-                angles[j] = (coordinates.get(c, 0.0) - offsets[i, j]) / signs[i, j]
+            if c is not None and c in values:
+                angles[..., j] = (values[c] - offsets[i, j]) / signs[i, j]
+            elif c is not None:
+                angles[..., j] = -offsets[i, j] / signs[i, j]
         q_joint = quat_from_euler(angles, "XYZ")
         q_rel = quat_mul(quat_mul(q_b[i], q_joint), quat_conj(q_b[i]))
-        out[i] = q_rel if parents[i] < 0 else quat_mul(out[parents[i]], q_rel)
+        out[..., i, :] = q_rel if parents[i] < 0 else quat_mul(out[..., parents[i], :], q_rel)
     return out
 
 
@@ -193,7 +199,7 @@ def decompose(
     q_b, _, _ = joint_tables(tree)
     q_rel = relative_rotations(q_world_segment, tree.parent_index, q_world_ground)
     q_joint = quat_mul(quat_mul(quat_conj(q_b)[None], q_rel), q_b[None])
-    valid: np.ndarray = np.isfinite(q_joint).all(axis=-1)
+    valid = np.asarray(np.isfinite(q_joint).all(axis=-1))
     safe = np.where(valid[..., None], q_joint, np.array([1.0, 0.0, 0.0, 0.0]))
     angles, gimbal = euler_from_quat(safe, "XYZ", return_gimbal=True)
     angles = np.where(valid[..., None], angles, np.nan)

@@ -82,7 +82,7 @@ def bvh_from_segments(
     for i, seg in enumerate(tree.segments):  # parents come first in the tree: valid BVH order
         p = parents[i]
         rel = q_g[:, i] if p < 0 else quat_mul(quat_conj(q_g[:, p]), q_g[:, i])
-        valid: np.ndarray = np.isfinite(rel).all(axis=1)
+        valid = np.asarray(np.isfinite(rel).all(axis=1))
         safe = np.where(valid[:, None], rel, np.array([1.0, 0.0, 0.0, 0.0]))
         euler = np.rad2deg(euler_from_quat(safe, _SEQ))
         euler[~valid] = np.nan
