@@ -40,7 +40,7 @@ def read_qmt_mat(path: str | Path) -> QmtRecording:
         raise FileNotFoundError(f"{p}: no such file")
     try:
         data = scipy.io.loadmat(p, squeeze_me=False)
-    except (ValueError, NotImplementedError, OSError) as exc:
+    except (ValueError, NotImplementedError, OSError, scipy.io.matlab.MatReadError) as exc:
         raise FileFormatError(f"{p}: not a readable MATLAB .mat file ({exc})") from exc
     if "t" not in data:
         raise FileFormatError(f"{p}: no time vector 't'; is this a qmt full-body recording?")
