@@ -177,7 +177,8 @@ def report_gimbal(
             exact[seg.joint.name] = idx
         if idx.size or n_near:
             first = int(idx[0]) if idx.size else int(np.flatnonzero(near[:, i])[0])
-            c = seg.joint.coordinates
+            order = seg.joint.slots()[0]
+            c = [seg.joint.coordinates[k] for k in order]  # in rotation order
             logger.warning(
                 "joint %s (segment %s, sensor %s): middle angle %s within %.0f deg of +-90 deg "
                 "(gimbal lock) in %d samples, first at sample %d (t = %.2f s); %s and %s are "
