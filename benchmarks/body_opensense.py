@@ -46,7 +46,11 @@ def run_opensim(workdir: Path) -> dict[str, object]:
     import opensim as osim
 
     osim.Logger.setLevelString("error")
-    for f in ("Rajagopal2015_opensense.osim", "walking_orientations.sto", "placement_orientations.sto"):
+    for f in (
+        "Rajagopal2015_opensense.osim",
+        "walking_orientations.sto",
+        "placement_orientations.sto",
+    ):
         shutil.copy(DATA / f, workdir / f)
     cwd = os.getcwd()
     os.chdir(workdir)
@@ -112,7 +116,9 @@ def stream_latency(tree_name: str, n_frames: int = 3000) -> dict[str, float]:
     stream = BodyStream(tree, res.calibration)
     q = np.stack([feeds[s].quat for s in tree.sensor_names], axis=1)
     t = walk["pelvis_imu"].time
-    frames = [{s: q[n % len(q), k] for k, s in enumerate(tree.sensor_names)} for n in range(n_frames)]
+    frames = [
+        {s: q[n % len(q), k] for k, s in enumerate(tree.sensor_names)} for n in range(n_frames)
+    ]
     stream.update(frames[0], 0.0)  # compile
     dt = np.empty(n_frames)
     for n in range(n_frames):
@@ -141,7 +147,9 @@ def compare(ours: JointAngleSeries, ref: JointAngleSeries) -> dict[str, dict[str
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--repeats", type=int, default=20)
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--write-reference", help="save OpenSim's IK angles (compared columns) as .mot")
@@ -177,20 +185,31 @@ def main(argv: list[str] | None = None) -> int:
     }  # fmt: skip
     if args.write_reference:
         cols = np.column_stack([ref.column(c) for c in COMPARED])
-        write_joint_angles_mot(args.write_reference, JointAngleSeries(ref.time, COMPARED, cols, name="opensim_imu_ik"))
+        write_joint_angles_mot(
+            args.write_reference, JointAngleSeries(ref.time, COMPARED, cols, name="opensim_imu_ik")
+        )
     if args.json:
         print(json.dumps(report, indent=2))
         return 0
-    o, u = report["opensim"], report["ours"]
+    o: dict = report["opensim"]  # type: ignore[assignment]
+    u: dict = report["ours"]  # type: ignore[assignment]
     print(f"OpenSense walking, {n_ref} frames ({IK_RANGE[0]}-{IK_RANGE[1]} s)")
-    print(f"  OpenSim IMU IK: {o['ik_s']:.2f} s = {o['frames_per_s']:.0f} frames/s "  # type: ignore[index]
-          f"(placer {o['placer_s']:.2f} s), mean orientation residual "  # type: ignore[index]
-          f"{o['mean_orientation_residual_deg']} deg")  # type: ignore[index]  # fmt: skip
-    print(f"  mocapkit: end to end {u['end_to_end_s'] * 1e3:.1f} ms = {u['frames_per_s_end_to_end']:.0f} "  # type: ignore[index]
-          f"frames/s; compute {u['compute_s'] * 1e3:.2f} ms = {u['frames_per_s_compute']:.0f} frames/s")  # type: ignore[index]  # fmt: skip
+    print(
+        f"  OpenSim IMU IK: {o['ik_s']:.2f} s = {o['frames_per_s']:.0f} frames/s "
+        f"(placer {o['placer_s']:.2f} s), mean orientation residual "
+        f"{o['mean_orientation_residual_deg']:.2f} deg"
+    )
+    print(
+        f"  mocapkit: end to end {u['end_to_end_s'] * 1e3:.1f} ms = "
+        f"{u['frames_per_s_end_to_end']:.0f} frames/s; compute {u['compute_s'] * 1e3:.2f} ms = "
+        f"{u['frames_per_s_compute']:.0f} frames/s"
+    )
     print(f"  speed-up end to end: {report['speedup_end_to_end']:.0f}x")
     for s in streams:
-        print(f"  streaming, {s['sensors']} sensors: p50 {s['p50_us']:.1f} us, p99 {s['p99_us']:.1f} us per frame")
+        print(
+            f"  streaming, {s['sensors']} sensors: p50 {s['p50_us']:.1f} us, "
+            f"p99 {s['p99_us']:.1f} us per frame"
+        )
     print("\n| coordinate | RMS difference [deg] | mean difference [deg] | OpenSim range [deg] |")
     print("|---|---|---|---|")
     for c, d in diff.items():

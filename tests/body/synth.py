@@ -47,9 +47,14 @@ def gait_like(
     return out
 
 
-def sensor_orientations(tree: SensorTree, time: np.ndarray, coords: Mapping[str, np.ndarray],
-                        mountings: np.ndarray, heading_rad: float,
-                        sensor_yaw: np.ndarray | None = None) -> dict[str, OrientationSeries]:
+def sensor_orientations(
+    tree: SensorTree,
+    time: np.ndarray,
+    coords: Mapping[str, np.ndarray],
+    mountings: np.ndarray,
+    heading_rad: float,
+    sensor_yaw: np.ndarray | None = None,
+) -> dict[str, OrientationSeries]:
     """``q_world_sensor`` of every sensor; ``sensor_yaw`` (S,) [rad] rotates each sensor's
     world about z (a 6D filter's own heading reference)."""
     q_wg = q_world_ground(heading_rad)

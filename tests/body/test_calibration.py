@@ -50,7 +50,7 @@ def test_pose_calibration_recovers_mountings_and_angles() -> None:
 
 
 def test_heading_from_a_sensor_axis_like_opensense() -> None:
-    tree, _, coords, mounts, ori = _recording(heading=-1.2)
+    tree, _, _coords, mounts, ori = _recording(heading=-1.2)
     # the pelvis sensor axis that points forward (ground x) in the true mounting
     fwd = quat_rotate(mounts[0], np.array([1.0, 0.0, 0.0]))
     axis = "xyz"[int(np.argmax(np.abs(fwd)))]
@@ -62,19 +62,22 @@ def test_heading_from_a_sensor_axis_like_opensense() -> None:
 
 
 def test_motion_during_calibration_is_refused_naming_the_sensor() -> None:
-    tree, t, coords, mounts, ori = _recording()
+    tree, t, _coords, _mounts, ori = _recording()
     q = ori["forearm_left"].quat.copy()
     turn = quat_from_axis_angle([0.0, 0.0, 1.0], np.deg2rad(np.linspace(0.0, 20.0, 50)))
     q[20:70] = quat_mul(turn, q[20:70])
     ori["forearm_left"] = OrientationSeries(t, q, name="forearm_left")
-    with pytest.raises(CalibrationError, match="sensor 'forearm_left' moved during the calibration pose: it turned 1[0-9].\\d deg"):
+    with pytest.raises(
+        CalibrationError,
+        match="sensor 'forearm_left' moved during the calibration pose: it turned 1[0-9].\\d deg",
+    ):
         calibrate_pose(tree, ori, (0.0, 0.9))
     with pytest.raises(CalibrationError, match="sensor 'forearm_left' moves the most"):
         find_still_window({"forearm_left": ori["forearm_left"]}, duration_s=2.5, rate_threshold=0.1)
 
 
 def test_sensor_missing_during_calibration_is_refused() -> None:
-    tree, t, coords, mounts, ori = _recording()
+    tree, t, _coords, _mounts, ori = _recording()
     q = ori["head"].quat.copy()
     q[:80] = np.nan
     ori["head"] = OrientationSeries(t, q, name="head")
@@ -83,8 +86,10 @@ def test_sensor_missing_during_calibration_is_refused() -> None:
 
 
 def test_connectors_up_checks_every_sensor() -> None:
-    tree, _, coords, mounts, ori = _recording(preset="right_arm_2")
-    with pytest.raises(CalibrationError, match="connectors-up initialisation needs every connector"):
+    tree, _, _coords, _mounts, ori = _recording(preset="right_arm_2")
+    with pytest.raises(
+        CalibrationError, match="connectors-up initialisation needs every connector"
+    ):
         calibrate_pose(tree, ori, (0.0, 0.9), pose="connectors_up", connector_axis="x",
                        connector_tolerance_deg=1.0)  # fmt: skip
     # with the axis that is actually up on both sensors it passes
@@ -93,14 +98,14 @@ def test_connectors_up_checks_every_sensor() -> None:
 
 
 def test_vertical_heading_axis_is_refused() -> None:
-    tree, _, coords, mounts, ori = _recording(identity_first=True)
+    tree, _, _coords, _mounts, ori = _recording(identity_first=True)
     # the pelvis sensor is aligned with the segment: its y axis is the segment's up
     with pytest.raises(CalibrationError, match="its axis -y is 90 deg from horizontal"):
         calibrate_pose(tree, ori, (0.0, 0.9), heading=HeadingFromSensor("hip", "-y"))
 
 
 def test_config_errors() -> None:
-    tree, _, coords, mounts, ori = _recording(preset="right_arm_2")
+    tree, _, _coords, _mounts, ori = _recording(preset="right_arm_2")
     with pytest.raises(ConfigError, match="unknown pose 'sitting'; known: anatomical"):
         calibrate_pose(tree, ori, (0.0, 0.9), pose="sitting")
     with pytest.raises(ConfigError, match="pose names coordinate\\(s\\) knee_angle_r"):
@@ -112,12 +117,16 @@ def test_config_errors() -> None:
 
 
 def test_calibration_json_round_trip_and_tree_check() -> None:
-    tree, _, coords, mounts, ori = _recording()
-    cal = calibrate_pose(tree, ori, (0.0, 0.9), heading=HeadingFixed(0.7)).with_root_reference("world")
+    tree, _, _coords, _mounts, ori = _recording()
+    cal = calibrate_pose(tree, ori, (0.0, 0.9), heading=HeadingFixed(0.7)).with_root_reference(
+        "world"
+    )
     again = BodyCalibration.from_dict(json.loads(json.dumps(cal.to_dict())))
     assert again.ground_heading_rad == 0.0
     for k in cal.segments:
-        np.testing.assert_allclose(again.segments[k].q_sensor_segment, cal.segments[k].q_sensor_segment)
+        np.testing.assert_allclose(
+            again.segments[k].q_sensor_segment, cal.segments[k].q_sensor_segment
+        )
     other = tree.with_sensor_names({"head": "imu9"})
     with pytest.raises(ConfigError, match="head \\(calibrated with 'head', tree has 'imu9'\\)"):
         again.check_tree(other)
@@ -128,9 +137,10 @@ def test_calibration_json_round_trip_and_tree_check() -> None:
 
 
 def test_find_still_window_on_synthetic() -> None:
-    tree, _, coords, mounts, ori = _recording()
+    _tree, _, _coords, _mounts, ori = _recording()
     t0, t1 = find_still_window(ori, duration_s=0.8)
-    assert t0 == pytest.approx(0.0) and t1 <= 1.0
+    assert t0 == pytest.approx(0.0)
+    assert t1 <= 1.0
 
 
 def test_reset_headings_aligns_any_sensor_heading_offsets() -> None:
@@ -147,7 +157,9 @@ def test_reset_headings_aligns_any_sensor_heading_offsets() -> None:
     known = {s.name: SegmentCalibration(s.sensor, mounts[i]) for i, s in enumerate(tree.segments)}
     cal = BodyCalibration(tree.name, known, heading_rad=0.3, method="known")
     before, _ = body_angles(tree, cal, ori)
-    assert np.nanmax(np.abs(before.angles.column("hip_rotation_r") - coords["hip_rotation_r"])) > 0.3
+    assert (
+        np.nanmax(np.abs(before.angles.column("hip_rotation_r") - coords["hip_rotation_r"])) > 0.3
+    )
     fixed = reset_headings(tree, cal, ori, (0.0, 0.9))
     res, _ = body_angles(tree, fixed, ori)
     for c in tree.coordinate_names:

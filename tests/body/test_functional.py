@@ -16,17 +16,40 @@ from tests.body.synth import gait_like, random_mountings, sensor_orientations
 def _sagittal_leg() -> SensorTree:
     """Pelvis, thigh, shank, foot with every flexion axis exactly the ground's z: pure
     flexion makes each segment turn exactly about its joint's first axis."""
-    z_joint = {"axes": [[0, 0, 1], [1, 0, 0], [0, 1, 0]]}
+    zxy = [[0, 0, 1], [1, 0, 0], [0, 1, 0]]
+
+    def seg(name: str, parent: str, sensor: str, joint: str, coords: list, axes: list) -> dict:
+        return {"name": name, "parent": parent, "sensor": sensor, "functional": "flexion",
+                "joint": {"name": joint, "coordinates": coords, "axes": axes}}  # fmt: skip
+
     segs = [
-        {"name": "pelvis", "parent": "ground", "sensor": "p",
-         "joint": {"name": "gp", "coordinates": ["pelvis_tilt", "pelvis_list", "pelvis_rotation"], **z_joint}},
-        {"name": "femur_r", "parent": "pelvis", "sensor": "f", "functional": "flexion",
-         "joint": {"name": "hip_r", "coordinates": ["hip_flexion_r", "hip_adduction_r", "hip_rotation_r"], **z_joint}},
-        {"name": "tibia_r", "parent": "femur_r", "sensor": "t", "functional": "flexion",
-         "joint": {"name": "knee_r", "coordinates": ["knee_angle_r", None, None], "axes": [[0, 0, -1], [1, 0, 0]]}},
-        {"name": "calcn_r", "parent": "tibia_r", "sensor": "c", "functional": "flexion",
-         "joint": {"name": "ankle_r", "coordinates": ["ankle_angle_r", None, None], "axes": [[0, 0, 1], [1, 0, 0]]}},
-    ]  # fmt: skip
+        seg("pelvis", "ground", "p", "gp", ["pelvis_tilt", "pelvis_list", "pelvis_rotation"], zxy),
+        seg(
+            "femur_r",
+            "pelvis",
+            "f",
+            "hip_r",
+            ["hip_flexion_r", "hip_adduction_r", "hip_rotation_r"],
+            zxy,
+        ),
+        seg(
+            "tibia_r",
+            "femur_r",
+            "t",
+            "knee_r",
+            ["knee_angle_r", None, None],
+            [[0, 0, -1], [1, 0, 0]],
+        ),
+        seg(
+            "calcn_r",
+            "tibia_r",
+            "c",
+            "ankle_r",
+            ["ankle_angle_r", None, None],
+            [[0, 0, 1], [1, 0, 0]],
+        ),
+    ]
+    segs[0]["functional"] = "none"
     return SensorTree.from_dict({"name": "leg", "segments": segs})
 
 
@@ -51,7 +74,9 @@ def test_exact_mountings_and_heading_with_a_shared_world() -> None:
     cal = calibrate_functional(tree, ori, (0.0, 0.9))
     assert abs(np.angle(np.exp(1j * (cal.heading_rad - 2.1)))) < EXACT_RAD
     for i, s in enumerate(tree.segments):
-        assert quat_angle_between(cal.segments[s.name].q_sensor_segment, mounts[i]) < EXACT_RAD, s.name
+        assert quat_angle_between(cal.segments[s.name].q_sensor_segment, mounts[i]) < EXACT_RAD, (
+            s.name
+        )
     res, _ = body_angles(tree, cal, ori)
     for c in tree.coordinate_names:
         np.testing.assert_allclose(res.angles.column(c), coords[c], atol=1e-6, err_msg=c)
@@ -100,7 +125,9 @@ def test_no_motion_is_refused() -> None:
     tree = _sagittal_leg()
     t = np.arange(300) / 100.0
     coords = {c: np.zeros_like(t) for c in tree.coordinate_names}
-    ori = sensor_orientations(tree, t, coords, random_mountings(tree, np.random.default_rng(0)), 0.0)
+    ori = sensor_orientations(
+        tree, t, coords, random_mountings(tree, np.random.default_rng(0)), 0.0
+    )
     with pytest.raises(CalibrationError, match="no segment gave a usable functional axis"):
         calibrate_functional(tree, ori, (0.0, 0.9))
     # with the heading given, segments without a functional axis use the pose
@@ -112,8 +139,12 @@ def test_tree_without_knee_or_elbow_needs_a_heading() -> None:
     tree = SensorTree.preset("lower_body").subtree(["pelvis", "femur_r", "femur_l"])
     t = np.arange(400) / 100.0
     coords = gait_like(tree, t, 1.0, {})
-    ori = sensor_orientations(tree, t, coords, random_mountings(tree, np.random.default_rng(1)), 0.0)
-    with pytest.raises(CalibrationError, match="has no knee or elbow to tell forward from backward"):
+    ori = sensor_orientations(
+        tree, t, coords, random_mountings(tree, np.random.default_rng(1)), 0.0
+    )
+    with pytest.raises(
+        CalibrationError, match="has no knee or elbow to tell forward from backward"
+    ):
         calibrate_functional(tree, ori, (0.0, 0.9))
 
 
@@ -123,6 +154,9 @@ def test_dominant_axis() -> None:
     rate = np.outer(np.sin(np.linspace(0, 20, 500)) * 3.0, axis) + rng.normal(0, 0.05, (500, 3))
     found, share, n = dominant_axis(rate, smooth=5)
     assert abs(found @ axis) > 0.999  # noise 0.05 rad/s against 3 rad/s: well under 1 deg
-    assert share > 0.95 and n > 100
+    assert share > 0.95
+    assert n > 100
     nothing, share0, n0 = dominant_axis(np.zeros((50, 3)))
-    assert np.isnan(nothing).all() and share0 == 0.0 and n0 == 0
+    assert np.isnan(nothing).all()
+    assert share0 == 0.0
+    assert n0 == 0

@@ -20,12 +20,17 @@ from mocapkit.series import OrientationSeries
 EXACT = 1e-9
 
 
-def _segments(tree: SensorTree, coords: dict[str, np.ndarray], heading: float = 0.3) -> dict[str, OrientationSeries]:
+def _segments(
+    tree: SensorTree, coords: dict[str, np.ndarray], heading: float = 0.3
+) -> dict[str, OrientationSeries]:
     n = len(next(iter(coords.values())))
     q_wg = q_world_ground(heading)
     q = np.array([compose_pose(tree, {c: v[k] for c, v in coords.items()}) for k in range(n)])
     t = np.arange(n) / 100.0
-    return {s.name: OrientationSeries(t, quat_mul(q_wg, q[:, i]), name=s.name) for i, s in enumerate(tree.segments)}
+    return {
+        s.name: OrientationSeries(t, quat_mul(q_wg, q[:, i]), name=s.name)
+        for i, s in enumerate(tree.segments)
+    }
 
 
 @pytest.mark.parametrize("preset", SensorTree.preset_names())
@@ -85,22 +90,29 @@ def test_gimbal_lock_is_held_continuous_and_reported(caplog: pytest.LogCaptureFi
     tree = SensorTree.preset("right_arm_2")
     n = 60
     coords = {c: np.zeros(n) for c in tree.coordinate_names}
-    coords["arm_add_r"] = np.concatenate([np.linspace(0.0, -np.pi / 2, 30), np.full(30, -np.pi / 2)])
+    coords["arm_add_r"] = np.concatenate(
+        [np.linspace(0.0, -np.pi / 2, 30), np.full(30, -np.pi / 2)]
+    )
     coords["arm_rot_r"] = np.concatenate([np.linspace(0.0, 0.3, 30), np.full(30, 0.3)])
     coords["arm_flex_r"] = np.concatenate([np.zeros(30), np.linspace(0.0, 0.4, 30)])
     with caplog.at_level(logging.WARNING, logger="mocapkit.body.joint_angles"):
         res = joint_angles_reference(tree, _segments(tree, coords, 0.0), q_world_ground(0.0))
-    assert "acromial_r" in res.gimbal and res.gimbal["acromial_r"].size >= 29
+    assert "acromial_r" in res.gimbal
+    assert res.gimbal["acromial_r"].size >= 29
     rot = res.angles.column("arm_rot_r")
     flex = res.angles.column("arm_flex_r")
     # held: the third angle keeps its value from before the lock; the first takes the rest,
     # so flex - rot (the only defined combination at arm_add = -90 deg) is right
     assert np.abs(rot[31:] - rot[30]).max() < 1e-6
-    np.testing.assert_allclose((flex - rot)[31:], (coords["arm_flex_r"] - coords["arm_rot_r"])[31:], atol=1e-6)
+    np.testing.assert_allclose(
+        (flex - rot)[31:], (coords["arm_flex_r"] - coords["arm_rot_r"])[31:], atol=1e-6
+    )
     assert np.abs(np.diff(flex)).max() < 0.05
     msg = caplog.text
     assert "joint acromial_r (segment humerus_r, sensor upper_arm_r)" in msg
-    assert "gimbal lock" in msg and "first at sample" in msg and "Fix:" in msg
+    assert "gimbal lock" in msg
+    assert "first at sample" in msg
+    assert "Fix:" in msg
 
 
 def test_nan_segment_makes_only_its_joints_nan() -> None:
@@ -133,9 +145,7 @@ def test_left_and_right_mirror(flex: float, add: float, rot: float, knee: float)
     # mirror of a rotation through the sagittal plane (z -> -z): (w, x, y, z) -> (w, -x, -y, z)
     m = np.array([1.0, -1.0, -1.0, 1.0])
     names = tree.segment_names
-    np.testing.assert_allclose(
-        q[names.index("tibia_l")] * m, q[names.index("tibia_r")], atol=1e-12
-    )
+    np.testing.assert_allclose(q[names.index("tibia_l")] * m, q[names.index("tibia_r")], atol=1e-12)
     rel_r = quat_mul(quat_conj(q[names.index("pelvis")]), q[names.index("femur_r")])
     rel_l = quat_mul(quat_conj(q[names.index("pelvis")]), q[names.index("femur_l")])
     np.testing.assert_allclose(rel_l * m, rel_r, atol=1e-12)

@@ -8,7 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mocapkit.body.calibration import HeadingFixed, HeadingFromSensor, calibrate_pose, pose_coordinates
+from mocapkit.body.calibration import (
+    HeadingFixed,
+    HeadingFromSensor,
+    calibrate_pose,
+    pose_coordinates,
+)
 from mocapkit.body.kinematics import BodyStream, body_angles
 from mocapkit.body.sensor_tree import SensorTree
 from mocapkit.errors import ConfigError, ShapeError
@@ -34,7 +39,7 @@ def synthetic() -> tuple:
 
 
 def test_fast_equals_reference_and_truth(synthetic: tuple) -> None:
-    tree, t, coords, ori, cal = synthetic
+    tree, _t, coords, ori, cal = synthetic
     fast, seg_f = body_angles(tree, cal, ori, backend="fast")
     ref, seg_r = body_angles(tree, cal, ori, backend="reference")
     np.testing.assert_allclose(fast.angles.values, ref.angles.values, atol=AGREE)
@@ -45,7 +50,7 @@ def test_fast_equals_reference_and_truth(synthetic: tuple) -> None:
 
 
 def test_stream_frame_by_frame_equals_batch(synthetic: tuple) -> None:
-    tree, t, coords, ori, cal = synthetic
+    tree, t, _coords, ori, cal = synthetic
     batch, _ = body_angles(tree, cal, ori)
     stream = BodyStream(tree, cal)
     out = np.empty_like(batch.angles.values)
@@ -54,11 +59,12 @@ def test_stream_frame_by_frame_equals_batch(synthetic: tuple) -> None:
         out[n] = stream.update(frame, t[n])
     np.testing.assert_allclose(out, batch.angles.values, atol=AGREE)
     assert stream.q_world_segment.shape == (15, 4)
-    assert not stream.stale.any() and stream.invalid_coordinates() == []
+    assert not stream.stale.any()
+    assert stream.invalid_coordinates() == []
 
 
 def test_split_run_equals_single_run(synthetic: tuple) -> None:
-    tree, t, coords, ori, cal = synthetic
+    tree, t, _coords, ori, cal = synthetic
     q = np.stack([ori[s].quat for s in tree.sensor_names], axis=1)
     whole = BodyStream(tree, cal).run(t, q)[0]
     stream = BodyStream(tree, cal)
@@ -71,7 +77,7 @@ def test_split_run_equals_single_run(synthetic: tuple) -> None:
 
 
 def test_stream_dropout_hold_then_nan(synthetic: tuple) -> None:
-    tree, t, coords, ori, cal = synthetic
+    tree, t, _coords, ori, cal = synthetic
     stream = BodyStream(tree, cal, dropout="hold", max_hold_s=0.05)
     k = tree.sensor_names.index("forearm_right")
     last = None
@@ -85,12 +91,14 @@ def test_stream_dropout_hold_then_nan(synthetic: tuple) -> None:
         if n == 149:
             last = stream.q_world_segment[k].copy()
         if 150 <= n <= 154:  # held 0.05 s after the last sample: joints still known
-            assert stream.stale[k] and np.isfinite(out).all()
+            assert stream.stale[k]
+            assert np.isfinite(out).all()
             np.testing.assert_array_equal(stream.q_world_segment[k], last)
         if n >= 155:  # then the forearm and every joint touching it are unknown
             bad = stream.invalid_coordinates()
             assert {"elbow_flex_r", "pro_sup_r", "wrist_flex_r", "wrist_dev_r"} <= set(bad)
-            assert "arm_flex_r" not in bad and "knee_angle_r" not in bad
+            assert "arm_flex_r" not in bad
+            assert "knee_angle_r" not in bad
     # back again: everything recovers
     frame = {s: ori[s].quat[200] for s in tree.sensor_names}
     stream.update(frame, t[200])
@@ -98,7 +106,7 @@ def test_stream_dropout_hold_then_nan(synthetic: tuple) -> None:
 
 
 def test_batch_dropout_policies(synthetic: tuple) -> None:
-    tree, t, coords, ori, cal = synthetic
+    tree, t, _coords, ori, cal = synthetic
     gap = dict(ori)
     q = ori["lower_leg_left"].quat.copy()
     q[100:140] = np.nan  # 0.4 s
@@ -115,7 +123,7 @@ def test_batch_dropout_policies(synthetic: tuple) -> None:
 
 
 def test_bad_frames_and_configuration(synthetic: tuple) -> None:
-    tree, t, coords, ori, cal = synthetic
+    tree, _t, _coords, ori, cal = synthetic
     stream = BodyStream(tree, cal)
     frame = {s: ori[s].quat[0] for s in tree.sensor_names}
     frame["imu99"] = np.array([1.0, 0.0, 0.0, 0.0])

@@ -66,13 +66,17 @@ def test_dict_round_trip(tmp_path: Path) -> None:
 def test_with_sensor_names_and_unknown_segment() -> None:
     tree = SensorTree.preset("right_arm_2").with_sensor_names({"humerus_r": "imu7"})
     assert tree.sensor_names == ("imu7", "forearm_r")
-    with pytest.raises(ConfigError, match="unknown segment\\(s\\) 'femur_r'; segments are: humerus_r"):
+    with pytest.raises(
+        ConfigError, match="unknown segment\\(s\\) 'femur_r'; segments are: humerus_r"
+    ):
         tree.with_sensor_names({"femur_r": "x"})
 
 
 def test_check_sensors_names_missing_and_available() -> None:
     tree = SensorTree.preset("right_arm_2")
-    with pytest.raises(ConfigError, match="no data for sensor\\(s\\) radius_r <- 'forearm_r'.*has: 'a'"):
+    with pytest.raises(
+        ConfigError, match="no data for sensor\\(s\\) radius_r <- 'forearm_r'.*has: 'a'"
+    ):
         tree.check_sensors(["upper_arm_r", "a"])
 
 
@@ -97,7 +101,10 @@ def _joint(**kw: object) -> JointSpec:
         ({"coordinates": ("a", "b")}, "coordinates must list three names"),
         ({"axes": [[0, 0, 1]]}, "axes must be 2 or 3 vectors"),
         ({"axes": [[0, 0, 1], [0, 0, 0]]}, "axes must be finite non-zero vectors"),
-        ({"axes": [[0, 0, 1], [0, 0.1, 1]]}, "nearly parallel; give two axes at least 10 deg apart"),
+        (
+            {"axes": [[0, 0, 1], [0, 0.1, 1]]},
+            "nearly parallel; give two axes at least 10 deg apart",
+        ),
         ({"signs": [1, 2, 1]}, "signs must be three values of \\+1 or -1"),
         ({"offsets": [0, np.nan, 0]}, "offsets must be three finite angles"),
         ({"order": (0, 0, 1)}, "order must be a permutation of 0, 1, 2"),

@@ -18,9 +18,11 @@ from mocapkit.series import JointAngleSeries, OrientationSeries
 
 def test_qmt_full_body_recording(shared_data: Path) -> None:
     rec = read_qmt_mat(shared_data / "full-body-15-imu" / "full_body_example_data.mat")
-    assert len(rec.names) == 16 and "upper_leg_right" in rec.names
+    assert len(rec.names) == 16
+    assert "upper_leg_right" in rec.names
     o = rec.orientation["hip"]
-    assert o.n_samples == 10000 and o.valid.all()
+    assert o.n_samples == 10000
+    assert o.valid.all()
     assert rec.imu["hip"].rate_hz == pytest.approx(100.0, rel=1e-6)
     # standing still at the start: the accelerometer reads about +g
     assert np.linalg.norm(rec.imu["hip"].acc[100:300].mean(axis=0)) == pytest.approx(9.81, abs=0.3)
@@ -45,7 +47,8 @@ def test_qmt_reader_errors(tmp_path: Path) -> None:
 
 def test_opensense_orientations(shared_data: Path, tmp_path: Path) -> None:
     walk = read_orientations_sto(shared_data / "opensense" / "walking_orientations.sto")
-    assert len(walk) == 8 and walk["pelvis_imu"].n_samples == 2432
+    assert len(walk) == 8
+    assert walk["pelvis_imu"].n_samples == 2432
     out = write_orientations_sto(tmp_path / "o.sto", walk)
     again = read_orientations_sto(out)
     # written with 10 significant digits

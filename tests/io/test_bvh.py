@@ -50,7 +50,9 @@ def test_segments_through_bvh_file_and_back(tmp_path: Path) -> None:
 
 def test_several_roots_get_a_ground_joint_and_gaps_are_held(tmp_path: Path) -> None:
     tree = SensorTree.preset("right_arm_2")
-    two = SensorTree("two", (tree.segments[0], *SensorTree.preset("right_arm_torso_3").segments[:1]))
+    two = SensorTree(
+        "two", (tree.segments[0], *SensorTree.preset("right_arm_torso_3").segments[:1])
+    )
     segs = _segments(two, n=10)
     q = segs["torso"].quat.copy()
     q[3:5] = np.nan
@@ -58,7 +60,9 @@ def test_several_roots_get_a_ground_joint_and_gaps_are_held(tmp_path: Path) -> N
     motion = bvh_from_segments(two, segs, q_world_ground(0.4))
     assert motion.joints[0].name == "Ground"
     assert motion.meta["held_frames"] == 2
-    np.testing.assert_array_equal(motion.joint_channels("torso")[3], motion.joint_channels("torso")[2])
+    np.testing.assert_array_equal(
+        motion.joint_channels("torso")[3], motion.joint_channels("torso")[2]
+    )
     write_bvh(tmp_path / "x.bvh", motion)
     with pytest.raises(ConfigError, match="bone_names: unknown segment\\(s\\) femur_r"):
         bvh_from_segments(two, segs, q_world_ground(0.0), bone_names={"femur_r": "x"})
@@ -83,7 +87,9 @@ def test_reader_refuses_malformed_files(tmp_path: Path) -> None:
     p.write_text("hello\n")
     with pytest.raises(FileFormatError, match="does not start with HIERARCHY"):
         read_bvh(p)
-    p.write_text("HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 3 Xrotation Yrotation Zrotation\n}\n")
+    p.write_text(
+        "HIERARCHY\nROOT Hips\n{\nOFFSET 0 0 0\nCHANNELS 3 Xrotation Yrotation Zrotation\n}\n"
+    )
     with pytest.raises(FileFormatError, match="no MOTION section"):
         read_bvh(p)
     p.write_text(

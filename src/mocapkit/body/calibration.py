@@ -460,7 +460,9 @@ def reset_headings(
     segs = {}
     for i, seg in enumerate(tree.segments):
         s = orientations[seg.sensor]
-        q_cal, _ = still_orientation(s, window_indices(s.time, window), seg.sensor, still_tolerance_deg)
+        q_cal, _ = still_orientation(
+            s, window_indices(s.time, window), seg.sensor, still_tolerance_deg
+        )
         old = calib.segments[seg.name]
         have = quat_rotate(quat_mul(q_cal, old.q_sensor_segment), np.array([1.0, 0.0, 0.0]))
         want = quat_rotate(quat_mul(q_wg, q_ground_seg[i]), np.array([1.0, 0.0, 0.0]))
@@ -473,7 +475,5 @@ def reset_headings(
         delta = float(np.arctan2(want[1], want[0]) - np.arctan2(have[1], have[0]))
         d = dict(old.diagnostics)
         d["heading_reset_deg"] = float(np.rad2deg(np.angle(np.exp(1j * delta))))
-        segs[seg.name] = SegmentCalibration(
-            old.sensor, old.q_sensor_segment, yaw_quat(delta), d
-        )
+        segs[seg.name] = SegmentCalibration(old.sensor, old.q_sensor_segment, yaw_quat(delta), d)
     return replace(calib, segments=segs)
