@@ -7,7 +7,8 @@ Per segment, two directions known in the segment frame are measured in the senso
   segment: ``q_ground_segment(pose)^-1 * y_ground``);
 - **flexion axis** (for segments marked ``functional: flexion``): the dominant rotation
   axis of the sensor while the subject moves (principal axis of its angular rate, computed
-  from the orientations) is taken to be the first axis of the segment's own joint (hip,
+  from the orientations, without the part about the world vertical, so that turning on
+  the spot does not count) is taken to be the first axis of the segment's own joint (hip,
   knee and ankle flexion, shoulder flexion, elbow flexion: in gait and most everyday
   motion close to the body's lateral axis).
 
@@ -81,6 +82,15 @@ def dominant_axis(
     cov = r.T @ r
     vals, vecs = np.linalg.eigh(cov)
     return vecs[:, -1], float(vals[-1] / max(vals.sum(), 1e-300)), len(r)
+
+
+def horizontal_rate(series: OrientationSeries) -> FloatArray:
+    """(N, 3) angular rate in the sensor frame [rad/s] without its component about the
+    world's vertical: turning on the spot rotates every segment about the vertical and
+    would otherwise hide the flexion axis (uses the inclination only, no heading)."""
+    rate = angular_rate(series)
+    up = quat_rotate(quat_conj(series.quat), np.array([0.0, 0.0, 1.0]))
+    return rate - np.sum(rate * up, axis=1, keepdims=True) * up
 
 
 def flexion_axis_in_segment(tree: SensorTree, q_ground_seg: FloatArray, i: int) -> FloatArray:
@@ -168,7 +178,7 @@ def calibrate_functional(
         diag[seg.name] = d
         if seg.functional != "flexion":
             continue
-        rate = angular_rate(s)
+        rate = horizontal_rate(s)
         if motion_window is None:
             use = np.ones(s.n_samples, dtype=bool)
             use[idx] = False
