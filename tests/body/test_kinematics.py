@@ -157,3 +157,19 @@ def test_fast_equals_reference_on_the_opensense_recording(shared_data: Path) -> 
     q = np.stack([walk[s].quat for s in tree.sensor_names], axis=1)
     rows = [stream.update_array(q[n], walk["pelvis_imu"].time[n]).copy() for n in range(len(q))]
     np.testing.assert_allclose(np.array(rows), fast.angles.values, atol=AGREE)
+
+
+def test_live_calibration_from_frames(synthetic: tuple) -> None:
+    """A live session: collect the first second of frames, calibrate, then stream."""
+    from mocapkit.body.timebase import orientations_from_frames
+
+    tree, t, coords, ori, _ = synthetic
+    frames = [{s: ori[s].quat[n] for s in tree.sensor_names} for n in range(90)]
+    del frames[10]["head"]  # a lost packet during calibration is tolerated
+    cal = calibrate_pose(tree, orientations_from_frames(frames, t[:90]), (0.0, 0.89),
+                         heading=HeadingFixed(-0.4))  # fmt: skip
+    stream = BodyStream(tree, cal)
+    out = np.array([stream.update({s: ori[s].quat[n] for s in tree.sensor_names}, t[n]).copy()
+                    for n in range(len(t))])  # fmt: skip
+    for k, c in enumerate(tree.coordinate_names):
+        np.testing.assert_allclose(out[:, k], coords[c], atol=AGREE, err_msg=c)

@@ -65,3 +65,22 @@ def align_orientations(
         return dict(series)
     t = common_time(series, rate_hz)
     return {k: resample_orientation(s, t) for k, s in series.items()}
+
+
+def orientations_from_frames(
+    frames: list[Mapping[str, object]], time: object
+) -> dict[str, OrientationSeries]:
+    """Frames as a live stream delivers them (``{sensor: q (4,)}`` per frame, a sensor may
+    be absent) -> ``{sensor: OrientationSeries}`` with NaN where a sensor was absent. For
+    calibrating from the first seconds of a live session (``calibrate_pose``)."""
+    t = as_float_array(time, "time")
+    check_shape(t, "time", len(frames))
+    names = sorted({k for f in frames for k in f})
+    out = {}
+    for name in names:
+        q = np.full((len(frames), 4), np.nan)
+        for i, f in enumerate(frames):
+            if name in f:
+                q[i] = np.asarray(f[name], dtype=np.float64)
+        out[name] = OrientationSeries(t, q, name=name)
+    return out
