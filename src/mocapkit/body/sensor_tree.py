@@ -15,6 +15,7 @@ decomposed with the intrinsic sequence ``XYZ`` (:mod:`mocapkit.body.joint_angles
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from importlib import resources
@@ -28,6 +29,21 @@ from mocapkit.errors import ConfigError
 from mocapkit.geometry import quat_from_matrix
 
 GROUND = "ground"
+
+
+def _yaml_load(text: str) -> Any:
+    import yaml
+
+    loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml when available
+    return yaml.load(text, Loader=loader)
+
+
+@functools.lru_cache(maxsize=32)
+def _load_preset(name: str) -> SensorTree:
+    """Parse a preset once (trees are immutable, so sharing one is safe)."""
+    text = resources.files("mocapkit.body.presets").joinpath(f"{name}.yaml").read_text()
+    return SensorTree.from_dict(_yaml_load(text))
+
 
 # Two joint axes closer than this to parallel [rad] cannot span a joint frame.
 _MIN_AXIS_SEPARATION = np.deg2rad(10.0)
@@ -130,14 +146,20 @@ class JointSpec:
         f0, f1 = b[:, o[0]], b[:, o[1]]
         return np.column_stack([f0, f1, np.cross(f0, f1)])
 
-    @property
+    @functools.cached_property
     def q_parent_joint(self) -> FloatArray:
         """(4,) orientation of the decomposition frame ``F`` in the parent segment frame."""
-        return quat_from_matrix(self.decomposition_frame)
+        q = quat_from_matrix(self.decomposition_frame)
+        q.setflags(write=False)
+        return q
 
     def slots(self) -> tuple[tuple[int, int, int], FloatArray, FloatArray]:
         """Per XYZ angle of ``F``: the coordinate index (into :attr:`coordinates`), its sign
         and its offset: ``coordinate[slot_coord[j]] = sign[j] * angle[j] + offset[j]``."""
+        return self._slots
+
+    @functools.cached_property
+    def _slots(self) -> tuple[tuple[int, int, int], FloatArray, FloatArray]:
         o = self.order
         assert o is not None
         parity = float(np.linalg.det(self.frame[:, list(o)]))  # +1 even, -1 odd permutation
@@ -272,7 +294,7 @@ class SensorTree:
 
         p = Path(path)
         try:
-            data = yaml.safe_load(p.read_text())
+            data = _yaml_load(p.read_text())
         except yaml.YAMLError as exc:
             raise ConfigError(f"{p}: not valid YAML ({exc})") from exc
         if not isinstance(data, Mapping):
@@ -285,10 +307,7 @@ class SensorTree:
         names = cls.preset_names()
         if name not in names:
             raise ConfigError(f"unknown body preset {name!r}; available: {', '.join(names)}")
-        text = resources.files("mocapkit.body.presets").joinpath(f"{name}.yaml").read_text()
-        import yaml
-
-        return cls.from_dict(yaml.safe_load(text))
+        return _load_preset(name)
 
     @staticmethod
     def preset_names() -> tuple[str, ...]:

@@ -8,6 +8,7 @@ holds and reports ``in_degrees`` so callers convert at the edge.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -110,12 +111,15 @@ def _parse_block_fast(block: list[str], k: int, quat: bool) -> tuple[FloatArray,
         commas = np.fromiter((line.count(",") for line in block), dtype=np.int64, count=n)
         if (commas != 3 * k).any():
             return None
-    try:
-        flat = np.array(
-            " ".join(block).replace("\t", " ").replace(",", " ").split(), dtype=np.float64
-        )
-    except ValueError:
-        return None
+    text = " ".join(block).replace("\t", " ").replace(",", " ")
+    with warnings.catch_warnings():
+        # a non-numeric token stops the parse (a ValueError, or a DeprecationWarning and a
+        # short result in older numpy): the row-by-row parser then names the bad row
+        warnings.simplefilter("ignore", DeprecationWarning)
+        try:
+            flat = np.fromstring(text, dtype=np.float64, sep=" ")
+        except ValueError:
+            return None
     width = 1 + k * (4 if quat else 1)
     if flat.size != n * width:
         return None
