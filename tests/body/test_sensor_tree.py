@@ -137,3 +137,18 @@ def test_bad_yaml(tmp_path: Path) -> None:
     p.write_text("segments: [unclosed")
     with pytest.raises(ConfigError, match="not valid YAML"):
         SensorTree.from_yaml(p)
+
+
+def test_joint_given_as_an_euler_sequence() -> None:
+    seg = {"name": "humerus_r", "parent": "ground", "sensor": "s",
+           "joint": {"name": "shoulder", "coordinates": ["a", "b", "c"], "sequence": "ZXY",
+                     "signs": [1, -1, 1]}}  # fmt: skip
+    tree = SensorTree.from_dict({"name": "t", "segments": [seg]})
+    np.testing.assert_array_equal(tree.segments[0].joint.axes, [[0, 0, 1], [1, 0, 0], [0, 1, 0]])
+    np.testing.assert_array_equal(tree.segments[0].joint.signs, [1, -1, 1])
+    seg["joint"]["sequence"] = "ZXZ"  # type: ignore[index]
+    with pytest.raises(ConfigError, match="'ZXZ' repeats an axis"):
+        SensorTree.from_dict({"name": "t", "segments": [seg]})
+    seg["joint"]["sequence"] = "zxy"  # type: ignore[index]
+    with pytest.raises(ConfigError, match="expected three upper-case axis letters"):
+        SensorTree.from_dict({"name": "t", "segments": [seg]})

@@ -38,6 +38,21 @@ def _yaml_load(text: str) -> Any:
     return yaml.load(text, Loader=loader)
 
 
+def sequence_axes(sequence: str, where: str = "sequence") -> list[list[float]]:
+    """Axes of an intrinsic Euler sequence (``"ZXY"``: z, then x, then y), for joints
+    written as a sequence instead of axes (negate a coordinate with ``signs``)."""
+    seq = sequence.strip()
+    if len(seq) != 3 or not seq.isupper() or any(c not in "XYZ" for c in seq):
+        raise ConfigError(
+            f"{where}: expected three upper-case axis letters (intrinsic), e.g. 'ZXY'; got {sequence!r}"
+        )
+    if seq[0] == seq[1] or seq[1] == seq[2] or seq[0] == seq[2]:
+        raise ConfigError(
+            f"{where}: {sequence!r} repeats an axis; a joint's three axes must differ (Tait-Bryan)"
+        )
+    return [[1.0 if "XYZ".index(c) == k else 0.0 for k in range(3)] for c in seq]
+
+
 @functools.lru_cache(maxsize=32)
 def _load_preset(name: str) -> SensorTree:
     """Parse a preset once (trees are immutable, so sharing one is safe)."""
@@ -267,10 +282,13 @@ class SensorTree:
                 raise ConfigError(f"tree {name!r}: segments[{i}] needs 'name' and 'joint'")
             j = entry["joint"]
             offsets_deg = j.get("offsets_deg", [0.0, 0.0, 0.0])
+            axes = j.get("axes")
+            if axes is None and "sequence" in j:
+                axes = sequence_axes(str(j["sequence"]), f"segments[{i}].joint.sequence")
             joint = JointSpec(
                 name=str(j.get("name", entry["name"])),
                 coordinates=tuple(j.get("coordinates", (None, None, None))),
-                axes=np.asarray(j.get("axes", []), dtype=np.float64),
+                axes=np.asarray(axes if axes is not None else [], dtype=np.float64),
                 signs=np.asarray(j.get("signs", [1.0, 1.0, 1.0]), dtype=np.float64),
                 offsets=np.deg2rad(np.asarray(offsets_deg, dtype=np.float64)),
                 order=tuple(j["order"]) if "order" in j else None,
