@@ -44,7 +44,8 @@ def sequence_axes(sequence: str, where: str = "sequence") -> list[list[float]]:
     seq = sequence.strip()
     if len(seq) != 3 or not seq.isupper() or any(c not in "XYZ" for c in seq):
         raise ConfigError(
-            f"{where}: expected three upper-case axis letters (intrinsic), e.g. 'ZXY'; got {sequence!r}"
+            f"{where}: expected three upper-case axis letters (intrinsic), e.g. 'ZXY'; "
+            f"got {sequence!r}"
         )
     if seq[0] == seq[1] or seq[1] == seq[2] or seq[0] == seq[2]:
         raise ConfigError(
