@@ -73,6 +73,21 @@ def test_orientation_series_validation() -> None:
         OrientationSeries(t, [[np.nan, 0, 0, 0], [1.0, 0, 0, 0], [1.0, 0, 0, 0]])
 
 
+def test_mag_gaps_are_all_nan_rows() -> None:
+    t, g, a = _arrays(6)
+    mag = np.ones((6, 3))
+    mag[2] = np.nan
+    rec = ImuRecording(t, g, a, mag=mag, name="s1")
+    np.testing.assert_array_equal(rec.mag_valid, [True, True, False, True, True, True])
+    assert not ImuRecording(t, g, a).mag_valid.any()
+    mag[4, 1] = np.nan  # partly NaN: not a gap marker
+    with pytest.raises(DataError, match=r"s1.mag: non-finite value at sample 4, column 1 .*gap"):
+        ImuRecording(t, g, a, mag=mag, name="s1")
+    mag[4, 1] = np.inf
+    with pytest.raises(DataError, match=r"s1.mag: non-finite value at sample 4, column 1"):
+        ImuRecording(t, g, a, mag=mag, name="s1")
+
+
 def test_joint_angle_series() -> None:
     from mocapkit.series import JointAngleSeries
 

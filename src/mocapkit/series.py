@@ -55,6 +55,20 @@ def _interpolate_rows(t: FloatArray, x: FloatArray) -> FloatArray:
     return out
 
 
+def _check_mag_gaps(mag: FloatArray, name: str, fix: str) -> None:
+    """Magnetometer rows may be all-NaN (a gap: the filters propagate without the
+    magnetometer there); a partly NaN row or an infinite value is an error."""
+    gap: np.ndarray = np.asarray(np.isnan(mag).all(axis=1))
+    bad = ~np.isfinite(mag) & ~gap[:, None]
+    if bad.any():
+        i, c = (int(v) for v in np.argwhere(bad)[0])
+        raise DataError(
+            f"{name}: non-finite value at sample {i}, column {c} "
+            f"({int(bad.any(axis=1).sum())} bad samples); mark a magnetometer gap with all "
+            f"three components NaN. {fix}"
+        )
+
+
 @dataclass(frozen=True)
 class ImuRecording:
     """One sensor's raw samples, in the sensor frame.
@@ -64,6 +78,9 @@ class ImuRecording:
         gyr: (N, 3) angular rate [rad/s].
         acc: (N, 3) specific force [m/s^2]; reads about +9.81 along the up axis at rest.
         mag: (N, 3) magnetic field (any consistent unit, uT when known) or None (6D).
+            All-NaN rows mark magnetometer gaps (dropouts, or samples outside the
+            magnetometer's own time range); the filters propagate without the
+            magnetometer there (see ``mocapkit.imu.filters.base``).
         name: sensor label, used in every error message.
     """
 
@@ -86,11 +103,11 @@ class ImuRecording:
                 continue
             arr = as_float_array(value, f"{n}.{key}")
             check_shape(arr, f"{n}.{key}", time.shape[0], 3)
-            check_finite(
-                arr,
-                f"{n}.{key}",
-                "Drop those samples or call ImuRecording.with_gaps_interpolated(...).",
-            )
+            fix = "Drop those samples or call ImuRecording.with_gaps_interpolated(...)."
+            if key == "mag":
+                _check_mag_gaps(arr, f"{n}.mag", fix)
+            else:
+                check_finite(arr, f"{n}.{key}", fix)
             fields[key] = _frozen(arr)
         if fields["gyr"] is None or fields["acc"] is None:
             raise DataError(f"{n}: gyr and acc are required")
@@ -148,6 +165,13 @@ class ImuRecording:
     @property
     def has_mag(self) -> bool:
         return self.mag is not None
+
+    @property
+    def mag_valid(self) -> np.ndarray:
+        """(N,) bool: samples with a magnetometer reading (all False in 6D)."""
+        if self.mag is None:
+            return np.zeros(self.n_samples, dtype=bool)
+        return np.asarray(np.isfinite(self.mag).all(axis=1))
 
     def slice(self, start: int, stop: int | None = None) -> ImuRecording:
         """Samples ``start:stop`` as a new recording (shares no writable memory)."""
