@@ -64,6 +64,7 @@ def test_angles_automatic_on_the_full_body_recording(
 def test_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["body", "angles", str(tmp_path / "none.sto")]) == 1
     assert "no such file" in capsys.readouterr().err
+    (tmp_path / "x.csv").write_text("t\n")
     assert main(["body", "angles", str(tmp_path / "x.csv")]) == 1
     assert "give --format" in capsys.readouterr().err
     (tmp_path / "x.sto").write_text("x\nendheader\ntime\ta\n0\t1,0,0,0\n1\t1,0,0,0\n")
@@ -76,3 +77,19 @@ def test_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert "no data for sensor(s) humerus_r <- 'upper_arm_r'" in capsys.readouterr().err
     assert main(["body", "angles", str(tmp_path / "x.sto"), "--map", "nonsense"]) == 1
     assert "expected SEGMENT=SENSOR" in capsys.readouterr().err
+
+
+def test_angles_on_the_ximu3_directory_with_a_filter(
+    shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    d = shared_data / "ximu3-lower-body"
+    argv = ["body", "angles", str(d), "--preset", "lower_body", "--json"]
+    assert main(argv) == 0
+    device = json.loads(capsys.readouterr().out)
+    assert main([*argv, "--filter", "bachmann", "--mode", "6d", "--heading-alignment", "pose"]) == 0
+    filt = json.loads(capsys.readouterr().out)
+    for report in (device, filt):
+        assert 95.0 < report["coordinates"]["knee_angle_r"]["max_deg"] < 140.0
+    assert main(["body", "angles", str(shared_data / "opensense" / "walking_orientations.sto"),
+                 "--preset", "opensense", "--filter", "miller"]) == 1  # fmt: skip
+    assert "has no raw samples to filter" in capsys.readouterr().err
