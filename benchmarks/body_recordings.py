@@ -26,9 +26,12 @@ import numpy as np
 from mocapkit.body.calibration import HeadingFromSensor
 from mocapkit.body.pipeline import BodyResult, run_body
 from mocapkit.body.sensor_tree import SensorTree
+from mocapkit.imu.filters.base import make_filter
+from mocapkit.io.imu_files import read_device_orientations, read_imu_recordings
 from mocapkit.io.joint_angles_mot import read_joint_angles_mot
 from mocapkit.io.opensense import read_orientations_sto
 from mocapkit.io.qmt_mat import read_qmt_mat
+from mocapkit.series import ImuRecording
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data"
@@ -73,9 +76,43 @@ def opensense() -> BodyResult:
     )  # fmt: skip
 
 
-def ximu3() -> BodyResult | None:
-    """The x-IMU3 lower-body recording (not yet: its reader is not on this branch)."""
-    return None
+def ximu3() -> BodyResult:
+    """The x-IMU3 lower-body recording on the devices' own fusion."""
+    return run_body(
+        SensorTree.preset("lower_body"), read_device_orientations(DATA / "ximu3-lower-body")
+    )
+
+
+def with_filter(tree_name: str, recs: dict[str, ImuRecording], name: str, mode: str,
+                **kwargs: Any) -> BodyResult:  # fmt: skip
+    """The body model on orientations from a mocapkit filter run on the raw samples."""
+    tree = SensorTree.preset(tree_name)
+    ori = {
+        k: make_filter(name, r.rate_hz).run_recording(r, use_mag=mode == "9d")
+        for k, r in recs.items()
+        if k in tree.sensor_names
+    }
+    return run_body(tree, ori, heading_alignment="shared" if mode == "9d" else "pose", **kwargs)
+
+
+def rms_vs(
+    a: BodyResult,
+    b: BodyResult,
+    names: tuple[str, ...],
+    windows: list[tuple[float, float]] | None = None,
+) -> dict[str, float]:
+    """RMS difference [deg] between two results on a's frames (b interpolated)."""
+    x, y = a.body.angles, b.body.angles
+    mask = np.ones(x.n_samples, dtype=bool)
+    if windows:
+        mask[:] = False
+        for w0, w1 in windows:
+            mask |= (x.time >= w0) & (x.time <= w1)
+    out = {}
+    for n in names:
+        d = np.rad2deg(x.column(n) - np.interp(x.time, y.time, y.column(n)))[mask]
+        out[n] = float(np.sqrt(np.nanmean(d**2)))
+    return out
 
 
 def plot_full_body(res: BodyResult, path: Path) -> None:
@@ -141,6 +178,32 @@ def plot_opensense(res: BodyResult, path: Path) -> None:
     plt.close(fig)
 
 
+def plot_ximu3(device: BodyResult, own: BodyResult, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = ["knee_angle_r", "knee_angle_l", "hip_flexion_r", "hip_flexion_l",
+             "ankle_angle_r", "pelvis_rotation"]  # fmt: skip
+    fig, axes = plt.subplots(3, 2, figsize=(12, 8), sharex=True)
+    t0 = device.body.angles.time[0]
+    for ax, n in zip(axes.ravel(), names, strict=True):
+        for res, label, ls in ((device, "device fusion", "-"), (own, "mocapkit miller 9D", "--")):
+            a = res.body.angles
+            ax.plot(a.time - t0, np.rad2deg(a.column(n)), ls=ls, lw=1.0, label=label)
+        ax.set_title(n, fontsize=9, loc="left")
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=8)
+    for ax in axes[-1]:
+        ax.set_xlabel("time [s]")
+    fig.suptitle("x-IMU3 lower body (mountings and heading estimated automatically), deg",
+                 fontsize=10)  # fmt: skip
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -154,6 +217,17 @@ def main(argv: list[str] | None = None) -> int:
     fb, fb_s = full_body()
     os_res = opensense()
     xi = ximu3()
+    xi_recs = read_imu_recordings(DATA / "ximu3-lower-body")
+    qmt_imu = read_qmt_mat(DATA / "full-body-15-imu" / "full_body_example_data.mat").imu
+    compared = ("knee_angle_r", "knee_angle_l", "hip_flexion_r", "hip_flexion_l",
+                "ankle_angle_r", "ankle_angle_l", "pelvis_tilt")  # fmt: skip
+    filters: dict[str, Any] = {"ximu3_lower_body": {}, "full_body_15": {}}
+    for name in ("miller", "bachmann"):
+        for mode in ("9d", "6d"):
+            res = with_filter("lower_body", xi_recs, name, mode)
+            filters["ximu3_lower_body"][f"{name}_{mode}"] = rms_vs(res, xi, compared)
+        res = with_filter("full_body_15", dict(qmt_imu), name, "6d", start=40.3)
+        filters["full_body_15"][f"{name}_6d"] = rms_vs(res, fb, compared, FULL_BODY_WALK)
     report: dict[str, Any] = {
         "full_body_15": {
             "seconds": fb_s,
@@ -165,19 +239,25 @@ def main(argv: list[str] | None = None) -> int:
             "calibration": os_res.calibration.diagnostics,
             "all": plausibility(os_res, None),
         },
+        "ximu3_lower_body": {
+            "calibration": xi.calibration.diagnostics,
+            "all": plausibility(xi, None),
+        },
+        "own_filters_vs_recording_fusion_rms_deg": filters,
     }
-    if xi is not None:
-        report["ximu3_lower_body"] = {"calibration": xi.calibration.diagnostics,
-                                      "all": plausibility(xi, None)}  # fmt: skip
     if args.plots:
         out = Path(args.plots)
         out.mkdir(parents=True, exist_ok=True)
         plot_full_body(fb, out / "body_full_body_15.png")
         plot_opensense(os_res, out / "body_opensense_vs_opensim.png")
+        plot_ximu3(xi, with_filter("lower_body", xi_recs, "miller", "9d"),
+                   out / "body_ximu3_lower_body.png")  # fmt: skip
     if args.json:
         print(json.dumps(report, indent=2, default=float))
         return 0
     for rec, body in report.items():
+        if rec.startswith("own_filters"):
+            continue
         print(f"## {rec}")
         cal = body["calibration"]
         print(
@@ -193,6 +273,13 @@ def main(argv: list[str] | None = None) -> int:
                 print(
                     f"| {name} | {r['p2_deg']:.1f} | {r['p98_deg']:.1f} | {r['max_step_deg']:.1f} |"
                 )
+        print()
+    print("## mocapkit filters on the raw samples vs the recording's own fusion, RMS [deg]")
+    for rec, per in filters.items():
+        print(f"| {rec} | " + " | ".join(compared) + " |")
+        print("|---|" + "---|" * len(compared))
+        for label, d in per.items():
+            print(f"| {label} | " + " | ".join(f"{d[c]:.1f}" for c in compared) + " |")
         print()
     return 0
 
