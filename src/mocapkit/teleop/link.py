@@ -11,7 +11,8 @@ from typing import Any
 import numpy as np
 
 from mocapkit._validate import FloatArray
-from mocapkit.robot.model import pose_matrix, pose_parts
+from mocapkit.robot.model import pose_matrix
+from mocapkit.teleop import _kernels
 from mocapkit.teleop import protocol as proto
 
 log = logging.getLogger("mocapkit.teleop.link")
@@ -40,6 +41,7 @@ class RobotLink:
         self.on_report = on_report
         self.malformed = 0
         self.send_errors = 0
+        self._quat = np.empty(4)
 
     def close(self) -> None:
         self.sock.close()
@@ -60,10 +62,11 @@ class RobotLink:
             return False
 
     def send_command(self, T_base_ee: Any) -> int:
-        """Send a pose (4, 4); returns its sequence number."""
+        """Send a pose (4, 4) [m]; returns its sequence number."""
         self.seq += 1
-        pos, quat = pose_parts(T_base_ee)
-        self._send(proto.encode_command(self.seq, time.monotonic_ns(), pos, quat))
+        T = np.asarray(T_base_ee, dtype=np.float64)
+        _kernels.mat_to_quat(T, self._quat)
+        self._send(proto.encode_command(self.seq, time.monotonic_ns(), T[:3, 3], self._quat))
         return self.seq
 
     def send_hold(self) -> None:
