@@ -119,3 +119,78 @@ def limit_command(cmd, prev, lo, hi, max_step, max_angle, have_prev):
                     )
             flags |= 4
     return flags
+
+
+@njit(cache=True)
+def quat_to_mat(q, out):
+    """Rotation matrix (3, 3) of a unit quaternion [w, x, y, z] into ``out``."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    out[0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    out[0, 1] = 2.0 * (x * y - w * z)
+    out[0, 2] = 2.0 * (x * z + w * y)
+    out[1, 0] = 2.0 * (x * y + w * z)
+    out[1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    out[1, 2] = 2.0 * (y * z - w * x)
+    out[2, 0] = 2.0 * (x * z - w * y)
+    out[2, 1] = 2.0 * (y * z + w * x)
+    out[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+
+
+@njit(cache=True)
+def segments_in_chest(q_world_segment, index, chest_index, R_world_chest, chest_in_segment, out):
+    """``out[g] = R_world_chest^T R_world_segment[index[g]]`` (G, 3, 3); the chest is the
+    segment ``chest_index`` turned by ``chest_in_segment``, or ``R_world_chest`` when
+    ``chest_index < 0``. Returns False when an orientation is not finite."""
+    for g in range(index.shape[0]):
+        for k in range(4):
+            if not math.isfinite(q_world_segment[index[g], k]):
+                return False
+    Rc = np.empty((3, 3))
+    if chest_index >= 0:
+        for k in range(4):
+            if not math.isfinite(q_world_segment[chest_index, k]):
+                return False
+        Rs = np.empty((3, 3))
+        quat_to_mat(q_world_segment[chest_index], Rs)
+        for i in range(3):
+            for j in range(3):
+                Rc[i, j] = (
+                    Rs[i, 0] * chest_in_segment[0, j]
+                    + Rs[i, 1] * chest_in_segment[1, j]
+                    + Rs[i, 2] * chest_in_segment[2, j]
+                )
+    else:
+        Rc[:, :] = R_world_chest
+    R = np.empty((3, 3))
+    for g in range(index.shape[0]):
+        quat_to_mat(q_world_segment[index[g]], R)
+        for i in range(3):
+            for j in range(3):
+                out[g, i, j] = Rc[0, i] * R[0, j] + Rc[1, i] * R[1, j] + Rc[2, i] * R[2, j]
+    return True
+
+
+@njit(cache=True)
+def relative_rotvec(q_parent, q_child, r0, r_out, v_out):
+    """``r = q_parent^-1 q_child`` into ``r_out`` and the rotation vector of ``r r0^-1``
+    (the child's turn relative to the parent since ``r0``, in the parent's frame) into
+    ``v_out``; returns its angle [rad]."""
+    pw, px, py, pz = q_parent[0], -q_parent[1], -q_parent[2], -q_parent[3]
+    cw, cx, cy, cz = q_child[0], q_child[1], q_child[2], q_child[3]
+    rw = pw * cw - px * cx - py * cy - pz * cz
+    rx = pw * cx + px * cw + py * cz - pz * cy
+    ry = pw * cy - px * cz + py * cw + pz * cx
+    rz = pw * cz + px * cy - py * cx + pz * cw
+    r_out[0], r_out[1], r_out[2], r_out[3] = rw, rx, ry, rz
+    ow, ox, oy, oz = r0[0], -r0[1], -r0[2], -r0[3]
+    dw = rw * ow - rx * ox - ry * oy - rz * oz
+    dx = rw * ox + rx * ow + ry * oz - rz * oy
+    dy = rw * oy - rx * oz + ry * ow + rz * ox
+    dz = rw * oz + rx * oy - ry * ox + rz * ow
+    if dw < 0.0:
+        dw, dx, dy, dz = -dw, -dx, -dy, -dz
+    s = math.sqrt(dx * dx + dy * dy + dz * dz)
+    angle = 2.0 * math.atan2(s, dw)
+    f = angle / s if s > 1e-12 else 2.0
+    v_out[0], v_out[1], v_out[2] = f * dx, f * dy, f * dz
+    return angle

@@ -27,7 +27,7 @@ import numpy as np
 
 from mocapkit._validate import FloatArray
 from mocapkit.body.sensor_tree import SensorTree
-from mocapkit.geometry import quat_conj, quat_log, quat_mul
+from mocapkit.teleop._kernels import relative_rotvec
 
 
 class HingeHeading:
@@ -51,6 +51,8 @@ class HingeHeading:
         self.long_axis = np.array([0.0, 1.0, 0.0])  # OpenSim segments: y along the bone
         self.min_flex = math.radians(min_flex_deg)
         self._r0: FloatArray | None = None
+        self._r = np.empty(4)
+        self._v = np.empty(3)
         self._sum = np.zeros(3)
         self.correction_rad: float | None = None
         """The heading correction [rad] once measured (add it to the heading)."""
@@ -62,17 +64,15 @@ class HingeHeading:
         if self.correction_rad is not None:
             return None
         qp, qc = q_world_segment[self.i_parent], q_world_segment[self.i_child]
-        if not (np.isfinite(qp).all() and np.isfinite(qc).all()):
+        if not (math.isfinite(qp[0] + qp[1] + qp[2] + qp[3] + qc[0] + qc[1] + qc[2] + qc[3])):
             return None
-        r = quat_mul(quat_conj(qp), qc)
         if self._r0 is None:
-            self._r0 = r
+            self._r0 = np.empty(4)
+            relative_rotvec(qp, qc, np.array([1.0, 0.0, 0.0, 0.0]), self._r0, self._v)
             return None
-        d = quat_mul(r, quat_conj(self._r0))  # the flexion, in the parent's frame
-        if d[0] < 0:
-            d = -d
-        v = 2.0 * quat_log(d)
-        angle = float(np.linalg.norm(v))
+        # the flexion since the calibration, in the parent's frame
+        angle = relative_rotvec(qp, qc, self._r0, self._r, self._v)
+        v = self._v
         self.flex_rad = angle
         if angle < 0.5 * self.min_flex:
             return None

@@ -11,7 +11,6 @@ from typing import Any
 import numpy as np
 
 from mocapkit._validate import FloatArray
-from mocapkit.robot.model import pose_matrix
 from mocapkit.teleop import _kernels
 from mocapkit.teleop import protocol as proto
 
@@ -42,6 +41,8 @@ class RobotLink:
         self.malformed = 0
         self.send_errors = 0
         self._quat = np.empty(4)
+        self._pose = np.eye(4)
+        self._pose_of: proto.Report | None = None
 
     def close(self) -> None:
         self.sock.close()
@@ -97,10 +98,18 @@ class RobotLink:
                     self.on_report(t, msg)
 
     def robot_pose(self) -> FloatArray | None:
-        """The latest reported pose T_base_ee (4, 4), or None."""
-        if self.latest is None:
+        """The latest reported pose T_base_ee (4, 4), or None (computed once per report)."""
+        latest = self.latest
+        if latest is None:
             return None
-        return pose_matrix(self.latest.pos, self.latest.quat)
+        if self._pose_of is not latest:
+            T = np.eye(4)
+            q = latest.quat
+            n = float(np.sqrt(q @ q))
+            _kernels.quat_to_mat(q / n if n > 0 else q, T)
+            T[:3, 3] = latest.pos
+            self._pose, self._pose_of = T, latest
+        return self._pose
 
     def report_age(self, now: float | None = None) -> float:
         """Seconds since the latest report (inf when none)."""

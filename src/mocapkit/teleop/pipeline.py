@@ -64,6 +64,7 @@ from mocapkit.robot.segment_retarget import (
 )
 from mocapkit.series import OrientationSeries
 from mocapkit.suit.protocol import Kind
+from mocapkit.teleop import _kernels
 from mocapkit.teleop.heading import HingeHeading
 from mocapkit.teleop.link import RobotLink
 from mocapkit.teleop.session import State, TeleopSession, TickOutput
@@ -256,7 +257,9 @@ class TeleopPipeline:
                 arm, groups, robonaut2_init_posture(side)
             )
             self._rt_segments = self.retargeter.segments
-            self._rt_index = np.array([tree.segment_names.index(s) for s in self._rt_segments])
+            self._rt_index = np.array(
+                [tree.segment_names.index(s) for s in self._rt_segments], dtype=np.int64
+            )
             # the segments in the chest frame at the calibration pose: what the suit's
             # initialisation posture means for the robot (q_init)
             q_g = compose_pose(tree, pose_coordinates(tree, c.pose))
@@ -459,14 +462,12 @@ class TeleopPipeline:
             if correction is not None:
                 self._refine_heading(correction, now)
         if self.retargeter is not None:
-            q_ws = body.q_world_segment
-            if self._chest_index >= 0:
-                R_wc = quat_to_matrix(q_ws[self._chest_index]) @ CHEST_IN_SEGMENT
-            else:
-                R_wc = self._R_world_chest
             R_seg = self._R_seg
-            R_seg[:] = R_wc.T @ quat_to_matrix(q_ws[self._rt_index])
-            if not np.isfinite(R_seg).all():
+            ok = _kernels.segments_in_chest(
+                body.q_world_segment, self._rt_index, self._chest_index,
+                self._R_world_chest, CHEST_IN_SEGMENT, R_seg,
+            )  # fmt: skip
+            if not ok:
                 return None, "body model: a segment's orientation is unknown"
             q = self.retargeter.solve(R_seg)
             clipped = self.retargeter.clipped
@@ -571,7 +572,6 @@ def _warm_up() -> None:
     global _WARM
     if _WARM:
         return
-    from mocapkit.teleop import _kernels
 
     T = np.eye(4)
     out = np.empty((4, 4))
@@ -579,4 +579,9 @@ def _warm_up() -> None:
     _kernels.pose_error(T, out)
     _kernels.limit_command(out, T, -np.ones(3), np.ones(3), 0.1, 0.1, True)
     _kernels.mat_to_quat(T, np.empty(4))
+    q = np.array([[1.0, 0.0, 0.0, 0.0]])
+    _kernels.segments_in_chest(
+        q, np.zeros(1, np.int64), 0, np.eye(3), np.eye(3), np.empty((1, 3, 3))
+    )
+    _kernels.relative_rotvec(q[0], q[0], q[0], np.empty(4), np.empty(3))
     _WARM = True
