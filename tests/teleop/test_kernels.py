@@ -16,9 +16,7 @@ from mocapkit.geometry import (
 from mocapkit.robot.model import pose_distance
 from mocapkit.teleop import _kernels
 
-_QUAT = st.lists(st.floats(-1, 1), min_size=4, max_size=4).filter(
-    lambda v: np.linalg.norm(v) > 0.1
-)
+_QUAT = st.lists(st.floats(-1, 1), min_size=4, max_size=4).filter(lambda v: np.linalg.norm(v) > 0.1)
 
 
 def _pose(q, p):

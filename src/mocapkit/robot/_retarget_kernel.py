@@ -46,6 +46,7 @@ def retarget_frame(
     clipped,  # (n,) bool out
     dropped,  # (G,) out [rad]
     targets,  # (S, 3, 3) work
+    clip_tol,  # [rad] beyond a limit by more than this counts as clipped
 ):
     for s in range(R_h.shape[0]):
         targets[s] = R_h[s] @ R0T[s] @ R_init[s]
@@ -95,6 +96,6 @@ def retarget_frame(
             q_out[j0 + j] = q_init[j0 + j] + best[j]
         dropped[g] = _wrap(best[2]) if virtual[g] else 0.0
     for i in range(q_out.shape[0]):
-        clipped[i] = q_out[i] < lower[i] or q_out[i] > upper[i]
+        clipped[i] = q_out[i] < lower[i] - clip_tol or q_out[i] > upper[i] + clip_tol
         q_out[i] = min(max(q_out[i], lower[i]), upper[i])
         q_prev[i] = q_out[i]

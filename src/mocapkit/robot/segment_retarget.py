@@ -50,6 +50,9 @@ from mocapkit.robot.model import ArmModel
 # Consecutive joint axes must be perpendicular within this cosine (0.06 deg): URDF
 # numbers rounded to 1.5708 are 4e-6 off; a genuinely oblique axis is far beyond.
 _PERPENDICULAR_TOL = 1e-3
+# A joint counts as clipped beyond its limit by more than this [rad]: an arm resting on a
+# limit (R2's straight elbow is joint3's upper limit) is not a violation.
+CLIP_TOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -285,7 +288,7 @@ class SegmentRetargeter:
             R_chest_segment, self._k_R0T, self._k_Rinit, self._k_seg, self._k_parent,
             self._k_start, self._k_len, self._k_C, self._k_Rpsi, self._k_psi, self._k_virtual,
             self._k_RliT, self.q_init, self._k_lower, self._k_upper, self._q_prev, self.q,
-            self.clipped, self.dropped, self._k_targets,
+            self.clipped, self.dropped, self._k_targets, CLIP_TOL,
         )  # fmt: skip
         return self.q
 
@@ -326,7 +329,7 @@ class SegmentRetargeter:
         clipped = tuple(
             self.arm.joint_names[i]
             for i in range(self.arm.n)
-            if q[i] < self.arm.lower[i] or q[i] > self.arm.upper[i]
+            if q[i] < self.arm.lower[i] - CLIP_TOL or q[i] > self.arm.upper[i] + CLIP_TOL
         )
         q = self.arm.clamp(q)
         self._q_prev = q.copy()

@@ -194,3 +194,17 @@ def relative_rotvec(q_parent, q_child, r0, r_out, v_out):
     f = angle / s if s > 1e-12 else 2.0
     v_out[0], v_out[1], v_out[2] = f * dx, f * dy, f * dz
     return angle
+
+
+@njit(cache=True)
+def pose_from_parts(pos, quat, out):
+    """``out`` (4, 4) = the pose of position (3,) [m] and quaternion (4,) (normalised here)."""
+    n = math.sqrt(quat[0] ** 2 + quat[1] ** 2 + quat[2] ** 2 + quat[3] ** 2)
+    q = np.empty(4)
+    for k in range(4):
+        q[k] = quat[k] / n
+    quat_to_mat(q, out)
+    for i in range(3):
+        out[i, 3] = pos[i]
+        out[3, i] = 0.0
+    out[3, 3] = 1.0

@@ -54,6 +54,7 @@ from mocapkit.teleop.server import ServerConfig, spawn_robot_server
 from mocapkit.teleop.session import SessionConfig, TeleopSession
 
 log = logging.getLogger("mocapkit.teleop.evaluate")
+_NICE = 10
 
 
 @dataclass
@@ -116,14 +117,15 @@ def truth_model(
     return q, T, angles
 
 
-def _interp(t: FloatArray, tp: FloatArray, xp: FloatArray) -> FloatArray:
+def interp_rows(t: FloatArray, tp: FloatArray, xp: FloatArray) -> FloatArray:
+    """Each column of ``xp`` (M, k) at times ``tp`` linearly interpolated at ``t``."""
     return np.stack([np.interp(t, tp, xp[:, k]) for k in range(xp.shape[1])], axis=1)
 
 
-def _best_lag(t: FloatArray, cmd: FloatArray, t_ach: FloatArray, ach: FloatArray) -> float:
+def best_lag(t: FloatArray, cmd: FloatArray, t_ach: FloatArray, ach: FloatArray) -> float:
     """The shift [s] (0-0.5 s, 1 ms steps) of the achieved path that matches the commanded."""
     lags = np.arange(0.0, 0.5, 0.001)
-    costs = [np.mean(np.sum((_interp(t + lag, t_ach, ach) - cmd) ** 2, axis=1)) for lag in lags]
+    costs = [np.mean(np.sum((interp_rows(t + lag, t_ach, ach) - cmd) ** 2, axis=1)) for lag in lags]
     return float(lags[int(np.argmin(costs))])
 
 
@@ -139,11 +141,13 @@ def evaluate_shape(
     dropouts: tuple[Dropout, ...] = (),
     record: Path | None = None,
     live_hook: Any = None,
+    size_m: float = 0.10,
 ) -> EvalResult:
     """Run one shape through the chain in real time (about ``shape_s`` + 7 s).
 
-    ``live_hook(live, t_go, motion)``, if given, is called on the main thread right after
-    the start (fault scenarios: pause the server, inject samples...), and must return.
+    ``size_m`` is the shape's size at the operator's hand [m]. ``live_hook(live, t_go,
+    motion, server)``, if given, is called on the main thread right after the calibration
+    starts (fault scenarios: pause the server, inject samples...), and must return.
     """
     suit = suit or SuitSetup()
     pipe_cfg = pipeline or PipelineConfig()
@@ -165,9 +169,11 @@ def evaluate_shape(
     srv_cfg = server or ServerConfig(robot=pipe_cfg.robot)
     live_cfg = LiveConfig(pipeline=pipe_cfg, session=session or SessionConfig())
     end = float(motion.time[-1])
-    with spawn_robot_server(srv_cfg, max_seconds=end + 120) as srv:
+    # the suit and the robot run on their own hardware; here they share the machine, at a
+    # lower priority so they do not preempt the host pipeline being measured
+    with spawn_robot_server(srv_cfg, max_seconds=end + 120, nice=_NICE) as srv:
         live = LiveSession(live_cfg, srv.address, record=record, keep_frames=True)
-        with live, TimelineSender(items, "127.0.0.1", live.suit_port) as sender:
+        with live, TimelineSender(items, "127.0.0.1", live.suit_port, nice=_NICE) as sender:
             if not _wait(lambda: live.link.latest is not None, 10.0):
                 raise RuntimeError("the robot server does not report")
             t_go = sender.go()
@@ -175,7 +181,7 @@ def evaluate_shape(
             _sleep_until(t_go + w0)
             live.calibrate(w1 - w0, wait=False)
             if live_hook is not None:
-                live_hook(live, t_go, motion)
+                live_hook(live, t_go, motion, srv)
             _sleep_until(t_go + motion.engage_t)
             live.engage()
             sent = sender.wait(end + 30.0)
@@ -238,8 +244,8 @@ def _figures(
         raise RuntimeError(f"{shape}: no command during the shape; transitions: {transitions}")
     t_rep = np.array([t for t, _ in live.reports])
     p_rep = np.stack([r.pos for _, r in live.reports])
-    lag = _best_lag(t_cmd[sel], cmd[sel], t_rep, p_rep)
-    achieved = _interp(t_cmd + lag, t_rep, p_rep)
+    lag = best_lag(t_cmd[sel], cmd[sel], t_rep, p_rep)
+    achieved = interp_rows(t_cmd + lag, t_rep, p_rep)
     ee = np.sqrt(np.mean(np.sum((achieved[sel] - ref[sel]) ** 2, axis=1)))
     cmd_err = np.sqrt(np.mean(np.sum((cmd[sel] - ref[sel]) ** 2, axis=1)))
     track = np.sqrt(np.mean(np.sum((achieved[sel] - cmd[sel]) ** 2, axis=1)))

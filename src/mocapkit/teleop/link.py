@@ -98,17 +98,16 @@ class RobotLink:
                     self.on_report(t, msg)
 
     def robot_pose(self) -> FloatArray | None:
-        """The latest reported pose T_base_ee (4, 4), or None (computed once per report)."""
+        """The latest reported pose T_base_ee (4, 4), or None. Computed once per report
+        into one buffer: copy it to keep it."""
         latest = self.latest
         if latest is None:
             return None
         if self._pose_of is not latest:
-            T = np.eye(4)
-            q = latest.quat
-            n = float(np.sqrt(q @ q))
-            _kernels.quat_to_mat(q / n if n > 0 else q, T)
-            T[:3, 3] = latest.pos
-            self._pose, self._pose_of = T, latest
+            if not np.isfinite(latest.quat).all() or not latest.quat.any():
+                return None  # a report with a broken pose: as good as none
+            _kernels.pose_from_parts(latest.pos, latest.quat, self._pose)
+            self._pose_of = latest
         return self._pose
 
     def report_age(self, now: float | None = None) -> float:

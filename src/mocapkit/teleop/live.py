@@ -222,6 +222,9 @@ class LiveSession:
     def snapshot(self) -> dict[str, Any]:
         """The session's status (see the module docstring); plain JSON-ready values."""
         snap = dict(self._snap)
+        # these two change on operator commands: current values, not the last publication
+        snap["state"] = self.session.state.value if self.receiver is not None else "stopped"
+        snap["calibration"] = self._calibration_state
         if self.receiver is not None:
             st = self.receiver.stats()
             names = {v: k for k, v in self.pipeline.sensor_ids.items()}

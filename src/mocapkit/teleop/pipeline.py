@@ -508,9 +508,12 @@ class TeleopPipeline:
         self.last_fault = fault
         return self.session.tick(now, T, robot_pose, age, fault, gate, reason)
 
-    def process(self, samples: Sequence[Any], now_ns: int | None = None) -> Frame | None:
-        """One drained batch (possibly empty: a watchdog tick); see the module docstring."""
-        now = time.monotonic()
+    def process(
+        self, samples: Sequence[Any], now_ns: int | None = None, now: float | None = None
+    ) -> Frame | None:
+        """One drained batch (possibly empty: a watchdog tick); see the module docstring.
+        ``now`` is the session clock [s] (default ``time.monotonic()``; tests set it)."""
+        now = time.monotonic() if now is None else now
         if self.link is not None:
             self.link.poll()  # reports (and keep the socket drained) on every tick
         oldest = self.ingest(samples, now) if samples else None
@@ -536,7 +539,7 @@ class TeleopPipeline:
             latency = time.perf_counter_ns() - oldest
             self.latencies_ns[self.n_latencies % _LATENCY_CAPACITY] = latency
             self.n_latencies += 1
-        if self.clipped:
+        if oldest is not None and self.clipped:
             out.notes.append(f"joint limit: {', '.join(self.clipped)} clipped")
         if oldest is None and out.command is None and not out.hold and not out.notes:
             return None
@@ -584,4 +587,5 @@ def _warm_up() -> None:
         q, np.zeros(1, np.int64), 0, np.eye(3), np.eye(3), np.empty((1, 3, 3))
     )
     _kernels.relative_rotvec(q[0], q[0], q[0], np.empty(4), np.empty(3))
+    _kernels.pose_from_parts(np.zeros(3), q[0], np.empty((4, 4)))
     _WARM = True

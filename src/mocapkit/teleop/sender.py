@@ -69,15 +69,20 @@ def _child(host: str, port: int) -> int:
 
 
 class TimelineSender:
-    """``(t, bytes)`` items sent from a child process; :meth:`go` starts them at an instant."""
+    """``(t, bytes)`` items sent from a child process; :meth:`go` starts them at an instant.
+    ``nice`` lowers the child's priority (it stands in for the suit's own hardware)."""
 
-    def __init__(self, items: list[tuple[float, bytes]], host: str, port: int) -> None:
-        env = dict(os.environ)
+    def __init__(
+        self, items: list[tuple[float, bytes]], host: str, port: int, nice: int = 0
+    ) -> None:
+        def lower_priority() -> None:  # pragma: no cover (runs in the child)
+            os.nice(nice)
+
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "mocapkit.teleop.sender", host, str(port)],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
-            env=env,
+            preexec_fn=lower_priority if nice else None,
         )
         assert self.proc.stdin is not None
         assert self.proc.stdout is not None

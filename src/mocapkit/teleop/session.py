@@ -51,6 +51,9 @@ class SessionConfig:
         link_timeout_s: no robot report for this long -> held.
         workspace_min, workspace_max: box for the commanded position [m].
         max_speed_m_s, max_rot_speed_rad_s: end-effector command speed limits.
+        unreachable_follow_m: while the server reports the target out of reach, stay
+            engaged (the robot holds its closest pose and follows again when the target
+            comes back) as long as it is at most this far [m]; beyond, disengage.
     """
 
     mode: Literal["relative", "absolute"] = "relative"
@@ -64,6 +67,7 @@ class SessionConfig:
     workspace_max: tuple[float, float, float] = (1.0, 1.0, 0.7)
     max_speed_m_s: float = 1.5
     max_rot_speed_rad_s: float = 4.0
+    unreachable_follow_m: float = 0.3
 
     def __post_init__(self) -> None:
         if self.mode not in ("relative", "absolute"):
@@ -123,6 +127,8 @@ class TeleopSession:
         self._far_since: float | None = None
         self._last_notes: set[str] = set()
         self._hold_pending = False
+        self._lost = False  # disengaged because the robot could not follow
+        self._short = False  # following a target out of the robot's reach
         self._lo = np.asarray(self.config.workspace_min, dtype=np.float64)
         self._hi = np.asarray(self.config.workspace_max, dtype=np.float64)
         self._prev = np.eye(4)
@@ -148,6 +154,7 @@ class TeleopSession:
         """Start (from disabled): align, reindexing first in relative mode."""
         if self.state == State.DISABLED:
             self._reindex_pending = self.config.mode == "relative"
+            self._lost = False
             self._go(t, State.ALIGNING, "operator engaged")
 
     def disable(self, t: float, reason: str = "operator disabled") -> None:
@@ -257,20 +264,48 @@ class TeleopSession:
             if dp <= c.engage_pos_m and dr <= c.engage_rot_rad:
                 self._go(t, State.ENGAGED, f"aligned within {dp * 1e3:.0f} mm, "
                          f"{np.degrees(dr):.1f} deg")  # fmt: skip
+            elif (
+                self._lost
+                and c.mode == "relative"
+                and dp <= c.disengage_pos_m
+                and dr <= c.disengage_rot_rad
+            ):
+                # the target came back near where the robot stopped: take up the rest
+                # by reindexing (no jump) and follow again
+                self._lost = False
+                self._dp = robot[:3, 3] - T_model[:3, 3]
+                self._dR = np.ascontiguousarray(T_model[:3, :3].T @ robot[:3, :3])
+                self._last_sent = None
+                cmd = self.apply_offset(T_model)
+                self._go(t, State.ENGAGED, f"target back within {dp * 1e3:.0f} mm: reindexed")
+                dp, dr = 0.0, 0.0
             else:
                 return TickOutput(self.state, hold=hold, notes=notes)
         # engaged
         far = dp > c.disengage_pos_m or dr > c.disengage_rot_rad
-        if far:
+        short = robot_reason == proto.Reason.UNREACHABLE and dp <= c.unreachable_follow_m
+        if far and short:
+            # the server's IK holds the arm at its closest to a target out of its reach:
+            # safe to keep commanding; it follows again when the target comes back
+            note = "target out of reach: the robot follows as close as it can (server: UNREACHABLE)"
+            if not self._short:
+                log.info(note, extra={"event": "limit"})
+            self._short = True
+            notes = [*notes, note]
+            self._far_since = None
+        elif far:
             self._far_since = t if self._far_since is None else self._far_since
             if t - self._far_since >= c.disengage_after_s:
                 why = f"robot cannot follow: {dp * 1e3:.0f} mm, {np.degrees(dr):.0f} deg away"
                 if robot_reason is not None and robot_reason != proto.Reason.OK:
                     why += f" (server: {robot_reason.name})"
+                self._lost = True
                 self._go(t, State.ALIGNING, why)
                 return TickOutput(self.state, hold=True, notes=[*notes, why])
         else:
             self._far_since = None
+        if not far:
+            self._short = False
         if (
             robot_gate is not None
             and robot_gate != proto.Gate.SYNCED
