@@ -7,10 +7,14 @@ from mocapkit.imu.filters.base import (
     make_filter,
     register_filter,
 )
+from mocapkit.imu.filters.polaris import Polaris, PolarisParams, PolarisState
 
 __all__ = [
     "FilterParams",
     "OrientationFilter",
+    "Polaris",
+    "PolarisParams",
+    "PolarisState",
     "available_filters",
     "make_filter",
     "register_filter",

@@ -1,0 +1,98 @@
+"""``polaris``: one pass over validated arrays with either backend, from a given state.
+
+Shared by the online filter (:mod:`mocapkit.imu.filters.polaris`) and the offline
+smoother (:mod:`mocapkit.imu.filters.polaris_offline`).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from mocapkit._validate import FloatArray
+from mocapkit.errors import DataError
+from mocapkit.geometry import quat_from_two_vectors
+from mocapkit.imu.filters.polaris_kernels import polaris_kernel, strapdown_kernel
+from mocapkit.imu.filters.polaris_params import PolarisCore, pack_state, unpack_state
+from mocapkit.imu.filters.polaris_reference import run_reference, start_core, strapdown_reference
+
+_UP = np.array([0.0, 0.0, 1.0])
+# A reading shorter than this (in its unit) has no direction.
+MIN_VECTOR_NORM = 1e-6
+# Samples averaged for the first tilt when the state is started from data [s].
+START_WINDOW_S = 0.05
+
+
+class PassResult(NamedTuple):
+    """Outputs of one pass: ``q9`` and ``q6`` (N, 4) and ``aux`` (N, 8) or (0, 8)."""
+
+    q9: FloatArray
+    q6: FloatArray
+    aux: FloatArray
+
+
+def initial_tilt(acc: FloatArray, use_acc: np.ndarray, rate_hz: float) -> FloatArray:
+    """``q_world_sensor`` with the mean accelerometer direction of the first usable samples
+    (``START_WINDOW_S``) brought onto up by the shortest rotation: any orientation works
+    (upside down included); the heading is that of the sensor frame."""
+    usable = np.flatnonzero(use_acc)
+    if usable.size == 0:
+        raise DataError(
+            "acc: no usable sample (all zero-norm or saturated) to initialise the "
+            "inclination; start the run where the accelerometer works"
+        )
+    n = max(1, round(START_WINDOW_S * rate_hz))
+    window = acc[usable[:n]]
+    mean = window.mean(axis=0)
+    if float(np.linalg.norm(mean)) <= MIN_VECTOR_NORM:
+        raise DataError(
+            f"acc: the first {window.shape[0]} usable samples average to zero (from sample "
+            f"{int(usable[0])}); no gravity direction to initialise from"
+        )
+    q: FloatArray = quat_from_two_vectors(mean, _UP)
+    return q
+
+
+def start(
+    c: FloatArray, core: PolarisCore, q_init: FloatArray, gyr0: FloatArray, acc0: FloatArray
+) -> None:
+    """Start ``core`` (same for both backends: the start is plain numpy)."""
+    start_core(c, core, q_init, gyr0, acc0)
+
+
+def run_pass(
+    c: FloatArray,
+    core: PolarisCore,
+    backend: str,
+    gyr: FloatArray,
+    acc: FloatArray,
+    mag: FloatArray,
+    dt: FloatArray,
+    use_acc: np.ndarray,
+    use_mag: np.ndarray,
+    has_mag: bool,
+    want_aux: bool = False,
+) -> PassResult:
+    """Process the arrays from the started ``core`` (updated in place)."""
+    n = gyr.shape[0]
+    out9 = np.empty((n, 4))
+    out6 = np.empty((n, 4))
+    aux = np.empty((n if want_aux else 0, 8))
+    if backend == "fast":
+        flat = pack_state(core)
+        polaris_kernel(c, flat, gyr, acc, mag, dt, use_acc, use_mag, has_mag, out9, out6, aux)
+        unpack_state(flat, core)
+    else:
+        run_reference(c, core, gyr, acc, mag, dt, use_acc, use_mag, has_mag, out9, out6, aux)
+    return PassResult(out9, out6, aux)
+
+
+def strapdown(backend: str, gyr: FloatArray, bias: FloatArray, dt: FloatArray) -> FloatArray:
+    """``q_I_S`` (N, 4) from identity with a per-sample bias (N, 3)."""
+    out = np.empty((gyr.shape[0], 4))
+    if backend == "fast":
+        strapdown_kernel(gyr, np.ascontiguousarray(bias), dt, out)
+    else:
+        strapdown_reference(gyr, bias, dt, out)
+    return out
