@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from mocapkit._validate import FloatArray, as_float_array, check_finite, check_shape
-from mocapkit.errors import ConfigError
+from mocapkit.errors import ConfigError, DataError
 from mocapkit.imu.filters import polaris_params as pp
 from mocapkit.imu.filters.base import Backend, OrientationFilter, register_filter
 from mocapkit.imu.filters.polaris_engine import (
@@ -81,6 +81,16 @@ class PolarisState:
         return float(self.core.mag_x[0])
 
 
+def _check_output(q: FloatArray) -> None:
+    """A kernel bug must never reach the user as a NaN quaternion."""
+    bad = ~np.isfinite(q).all(axis=1)
+    if bad.any():
+        raise DataError(
+            f"polaris: non-finite orientation at sample {int(np.flatnonzero(bad)[0])}; "
+            "this is a bug, please report it with the input"
+        )
+
+
 @register_filter("polaris")
 class Polaris(OrientationFilter):
     """The ``polaris`` filter; see the module docstring.
@@ -89,8 +99,8 @@ class Polaris(OrientationFilter):
         params: :class:`PolarisParams` (or build with ``Polaris.create(rate_hz, **gains)``).
         backend: ``"fast"`` (numba) or ``"reference"`` (readable numpy); they agree to 1e-9.
 
-    A new filter starts from its first samples (inclination from the mean accelerometer
-    direction of the first 50 ms, any orientation; in 9D the heading from the first
+    A new filter starts from its first samples (inclination from the first accelerometer
+    sample, any orientation, then averaged over ``tau_acc``; in 9D the heading from the first
     magnetometer sample, refined by the heading filter).
     """
 
@@ -165,12 +175,13 @@ class Polaris(OrientationFilter):
             return np.zeros((0, 4)), np.zeros((0, 4))
         core = self.state.core
         if not self.state.started:
-            q_init = initial_tilt(acc, use_acc, self.params.rate_hz)
+            q_init = initial_tilt(acc, use_acc)
             first = int(np.flatnonzero(use_acc)[0])
             start(self._c, core, q_init, gyr[0], acc[first])
         result = run_pass(
             self._c, core, self.backend, gyr, acc, mag_arr, steps, use_acc, use_mag, has_mag
         )
+        _check_output(result.q9)
         self.state.quat = result.q9[-1].copy()
         self.state.quat6 = result.q6[-1].copy()
         return result.q9, result.q6
@@ -203,7 +214,9 @@ class Polaris(OrientationFilter):
         mag_arr = np.zeros((n, 3)) if m is None else m
         use_mag = np.linalg.norm(mag_arr, axis=1) > MIN_VECTOR_NORM
         dt = np.full(n, self.params.dt)
-        return smooth(self.params, self.backend, g, a, mag_arr, dt, use_acc, use_mag, has_mag)
+        result = smooth(self.params, self.backend, g, a, mag_arr, dt, use_acc, use_mag, has_mag)
+        _check_output(result.q6 if result.q9 is None else result.q9)
+        return result
 
     def _validated(
         self, gyr: Any, acc: Any, mag: Any

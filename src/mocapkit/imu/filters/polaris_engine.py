@@ -13,15 +13,18 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.errors import DataError
 from mocapkit.geometry import quat_from_two_vectors
-from mocapkit.imu.filters.polaris_kernels import polaris_kernel, strapdown_kernel
+from mocapkit.imu.filters.polaris_kernels import heading_kernel, polaris_kernel, strapdown_kernel
 from mocapkit.imu.filters.polaris_params import PolarisCore, pack_state, unpack_state
-from mocapkit.imu.filters.polaris_reference import run_reference, start_core, strapdown_reference
+from mocapkit.imu.filters.polaris_reference import (
+    heading_pass_reference,
+    run_reference,
+    start_core,
+    strapdown_reference,
+)
 
 _UP = np.array([0.0, 0.0, 1.0])
 # A reading shorter than this (in its unit) has no direction.
 MIN_VECTOR_NORM = 1e-6
-# Samples averaged for the first tilt when the state is started from data [s].
-START_WINDOW_S = 0.05
 
 
 class PassResult(NamedTuple):
@@ -32,25 +35,18 @@ class PassResult(NamedTuple):
     aux: FloatArray
 
 
-def initial_tilt(acc: FloatArray, use_acc: np.ndarray, rate_hz: float) -> FloatArray:
-    """``q_world_sensor`` with the mean accelerometer direction of the first usable samples
-    (``START_WINDOW_S``) brought onto up by the shortest rotation: any orientation works
-    (upside down included); the heading is that of the sensor frame."""
+def initial_tilt(acc: FloatArray, use_acc: np.ndarray) -> FloatArray:
+    """``q_world_sensor`` at the first usable accelerometer sample: its direction brought
+    onto up by the shortest rotation. Any orientation works (upside down included); the
+    heading is that of the sensor frame. One sample only, so that a run split anywhere
+    starts the same way (the first ``tau_acc`` seconds then average, see (P3))."""
     usable = np.flatnonzero(use_acc)
     if usable.size == 0:
         raise DataError(
             "acc: no usable sample (all zero-norm or saturated) to initialise the "
             "inclination; start the run where the accelerometer works"
         )
-    n = max(1, round(START_WINDOW_S * rate_hz))
-    window = acc[usable[:n]]
-    mean = window.mean(axis=0)
-    if float(np.linalg.norm(mean)) <= MIN_VECTOR_NORM:
-        raise DataError(
-            f"acc: the first {window.shape[0]} usable samples average to zero (from sample "
-            f"{int(usable[0])}); no gravity direction to initialise from"
-        )
-    q: FloatArray = quat_from_two_vectors(mean, _UP)
+    q: FloatArray = quat_from_two_vectors(acc[usable[0]], _UP)
     return q
 
 
@@ -95,4 +91,23 @@ def strapdown(backend: str, gyr: FloatArray, bias: FloatArray, dt: FloatArray) -
         strapdown_kernel(gyr, np.ascontiguousarray(bias), dt, out)
     else:
         strapdown_reference(gyr, bias, dt, out)
+    return out
+
+
+def heading_pass(
+    c: FloatArray,
+    backend: str,
+    q6: FloatArray,
+    mag: FloatArray,
+    dt: FloatArray,
+    use_mag: np.ndarray,
+) -> FloatArray:
+    """The heading filter alone over a given 6D orientation: (N, 2) ``[delta, var]``."""
+    core = PolarisCore()
+    out = np.empty((q6.shape[0], 2))
+    if backend == "fast":
+        flat = pack_state(core)
+        heading_kernel(c, flat, np.ascontiguousarray(q6), mag, dt, use_mag, out)
+    else:
+        heading_pass_reference(c, core, q6, mag, dt, use_mag, out)
     return out

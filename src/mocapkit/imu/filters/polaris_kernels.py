@@ -33,6 +33,7 @@ from mocapkit.imu.filters.polaris_params import (
     C_MAG_GATE,
     C_MAG_NOISE,
     C_MAG_RESET_TIME,
+    C_MAG_TIMING,
     C_REST_ALPHA,
     C_REST_MIN_TIME,
     C_REST_TH_ACC,
@@ -40,6 +41,7 @@ from mocapkit.imu.filters.polaris_params import (
     C_TILT_NOISE,
     C_TILT_NOISE_REST,
     C_TILT_PROCESS,
+    C_WARMUP,
     HISTORY_LEN,
     S_ACC_LP,
     S_ACC_LP_STATE,
@@ -52,12 +54,14 @@ from mocapkit.imu.filters.polaris_params import (
     S_DRIFT_J,
     S_DRIFT_J_LP,
     S_DRIFT_J_LP_STATE,
+    S_DRIFT_JZ,
     S_HISTORY,
     S_HISTORY_POS,
     S_MAG_COUNT,
     S_MAG_DIST_TIME,
     S_MAG_P,
     S_MAG_R_SUM,
+    S_MAG_RATE2_SUM,
     S_MAG_READY,
     S_MAG_SCALE,
     S_MAG_X,
@@ -70,6 +74,7 @@ from mocapkit.imu.filters.polaris_params import (
     S_REST_GYR_SUM,
     S_REST_TIME,
     S_TILT_P,
+    S_WARMUP_COUNT,
 )
 
 
@@ -110,6 +115,20 @@ def _lp_step(c: np.ndarray, value: float, s: np.ndarray, i: int) -> float:
     s[i] = c[C_B1] * value - c[C_A1] * y + s[i + 1]
     s[i + 1] = c[C_B2] * value - c[C_A2] * y
     return y
+
+
+@njit(cache=True, inline="always")
+def _lowpass(c: np.ndarray, value: float, s: np.ndarray, out: int, mem: int, warm: float) -> float:
+    """(P3)/(P4) low-pass of one channel: running mean while ``warm`` > 0 (seeding the
+    Butterworth memory ``s[mem:mem + 2]`` at its end), then the Butterworth."""
+    if warm > 0.0:
+        y = s[out] + (value - s[out]) / warm
+        if warm >= c[C_WARMUP]:
+            st2 = (c[C_B2] - c[C_A2]) * y
+            s[mem] = (c[C_B1] - c[C_A1]) * y + st2
+            s[mem + 1] = st2
+        return y
+    return _lp_step(c, value, s, mem)
 
 
 @njit(cache=True)
@@ -204,16 +223,17 @@ def _tilt_update(c: np.ndarray, s: np.ndarray, P: np.ndarray, R: np.ndarray, v: 
         s10 = ph0[1] + d3 * ph0[2] + d4 * ph0[3] + d5 * ph0[4]
         s11 = ph1[1] + d3 * ph1[2] + d4 * ph1[3] + d5 * ph1[4] + sigma * sigma
         det = s00 * s11 - s01 * s10
-        v00, v01, v10, v11 = s11 / det, -s01 / det, -s10 / det, s00 / det
-        xs = v[10:15]
-        xs[0], xs[1], xs[2], xs[3], xs[4] = x0, x1, x2, x3, x4
-        for r in range(5):
-            k0 = ph0[r] * v00 + ph1[r] * v10
-            k1 = ph0[r] * v01 + ph1[r] * v11
-            xs[r] += k0 * i0 + k1 * i1
-            for col in range(5):
-                P[r, col] -= k0 * ph0[col] + k1 * ph1[col]
-        x0, x1, x2, x3, x4 = xs[0], xs[1], xs[2], xs[3], xs[4]
+        if det > 0.0:  # S is positive definite unless the state has broken down
+            v00, v01, v10, v11 = s11 / det, -s01 / det, -s10 / det, s00 / det
+            xs = v[10:15]
+            xs[0], xs[1], xs[2], xs[3], xs[4] = x0, x1, x2, x3, x4
+            for r in range(5):
+                k0 = ph0[r] * v00 + ph1[r] * v10
+                k1 = ph0[r] * v01 + ph1[r] * v11
+                xs[r] += k0 * i0 + k1 * i1
+                for col in range(5):
+                    P[r, col] -= k0 * ph0[col] + k1 * ph1[col]
+            x0, x1, x2, x3, x4 = xs[0], xs[1], xs[2], xs[3], xs[4]
     # (P10) apply.
     angle = math.sqrt(x0 * x0 + x1 * x1)
     if angle > 1e-15:
@@ -231,8 +251,10 @@ def _tilt_update(c: np.ndarray, s: np.ndarray, P: np.ndarray, R: np.ndarray, v: 
     s[S_BIAS] += x2
     s[S_BIAS + 1] += x3
     s[S_BIAS + 2] += x4
-    for i in range(25):
-        s[S_TILT_P + i] = P[i // 5, i % 5]
+    # Symmetrise (see the reference): rounding asymmetry would otherwise grow.
+    for r in range(5):
+        for col in range(5):
+            s[S_TILT_P + 5 * r + col] = 0.5 * (P[r, col] + P[col, r])
     # Rebase the drift integrals (see the reference).
     b1m_a1 = c[C_B1] - c[C_A1]
     b2m_a2 = c[C_B2] - c[C_A2]
@@ -257,12 +279,15 @@ def _tilt_update(c: np.ndarray, s: np.ndarray, P: np.ndarray, R: np.ndarray, v: 
 
 
 @njit(cache=True)
-def _invert3(S: np.ndarray, out: np.ndarray) -> None:
-    """``out = inv(S)`` for a 3x3 matrix by cofactors."""
+def _invert3(S: np.ndarray, out: np.ndarray) -> bool:
+    """``out = inv(S)`` for a 3x3 matrix by cofactors; False (out untouched) unless the
+    determinant is positive (S is a covariance)."""
     c00 = S[1, 1] * S[2, 2] - S[1, 2] * S[2, 1]
     c01 = S[1, 2] * S[2, 0] - S[1, 0] * S[2, 2]
     c02 = S[1, 0] * S[2, 1] - S[1, 1] * S[2, 0]
     det = S[0, 0] * c00 + S[0, 1] * c01 + S[0, 2] * c02
+    if not det > 0.0:
+        return False
     out[0, 0] = c00 / det
     out[0, 1] = (S[0, 2] * S[2, 1] - S[0, 1] * S[2, 2]) / det
     out[0, 2] = (S[0, 1] * S[1, 2] - S[0, 2] * S[1, 1]) / det
@@ -272,6 +297,7 @@ def _invert3(S: np.ndarray, out: np.ndarray) -> None:
     out[2, 0] = c02 / det
     out[2, 1] = (S[0, 1] * S[2, 0] - S[0, 0] * S[2, 1]) / det
     out[2, 2] = (S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]) / det
+    return True
 
 
 @njit(cache=True)
@@ -283,7 +309,11 @@ def _heading_update(
     T = s[S_BLOCK_TIME]
     for i in range(36):
         P[i // 6, i % 6] = s[S_MAG_P + i]
-    P[0, 0] += c[C_HEADING_PROCESS] * c[C_HEADING_PROCESS] * T
+    q_bias = 0.0
+    for r in range(3):
+        for col in range(3):
+            q_bias += s[S_DRIFT_JZ + r] * s[S_TILT_P + 5 * (2 + r) + 2 + col] * s[S_DRIFT_JZ + col]
+    P[0, 0] += c[C_HEADING_PROCESS] * c[C_HEADING_PROCESS] * T + q_bias
     P[1, 1] += c[C_FIELD_PROCESS] * c[C_FIELD_PROCESS] * T
     P[2, 2] += c[C_FIELD_PROCESS] * c[C_FIELD_PROCESS] * T
     count = s[S_MAG_COUNT]
@@ -315,18 +345,21 @@ def _heading_update(
                 for t in range(6):
                     acc += P[r, t] * H[col, t]
                 PHt[r, col] = acc
-        r_mag = c[C_MAG_NOISE] * c[C_MAG_NOISE]
+        r_mag = c[C_MAG_NOISE] * c[C_MAG_NOISE] + (
+            c[C_MAG_TIMING] * c[C_MAG_TIMING] * (s[S_MAG_RATE2_SUM] / count)
+        )
         for r in range(3):
             for col in range(3):
                 acc = 0.0
                 for t in range(6):
                     acc += H[r, t] * PHt[t, col]
                 S[r, col] = acc + (r_mag if r == col else 0.0)
-        _invert3(S, Si)
-        d2 = 0.0
-        for r in range(3):
-            for col in range(3):
-                d2 += nu[r] * Si[r, col] * nu[col]
+        d2 = math.inf  # a broken-down state (S not positive definite) counts as rejected
+        if _invert3(S, Si):
+            d2 = 0.0
+            for r in range(3):
+                for col in range(3):
+                    d2 += nu[r] * Si[r, col] * nu[col]
         gate = c[C_MAG_GATE]
         if d2 <= gate * gate:
             for r in range(6):
@@ -351,13 +384,41 @@ def _heading_update(
                 dist = 0.0
             s[S_MAG_DIST_TIME] = dist
     s[x] = math.atan2(math.sin(s[x]), math.cos(s[x]))
-    for i in range(36):
-        s[S_MAG_P + i] = P[i // 6, i % 6]
+    for r in range(6):
+        for col in range(6):
+            s[S_MAG_P + 6 * r + col] = 0.5 * (P[r, col] + P[col, r])
     for i in range(3):
         s[S_MAG_Y_SUM + i] = 0.0
     for i in range(9):
         s[S_MAG_R_SUM + i] = 0.0
     s[S_MAG_COUNT] = 0.0
+    s[S_MAG_RATE2_SUM] = 0.0
+
+
+@njit(cache=True)
+def _start_heading(c: np.ndarray, s: np.ndarray, R: np.ndarray, mx: float, my: float,
+                   mz: float) -> None:  # fmt: skip
+    """First magnetometer sample: scale, heading and field from it; hard iron 0."""
+    scale = math.sqrt(mx * mx + my * my + mz * mz)
+    fx = R[0, 0] * (mx / scale) + R[0, 1] * (my / scale) + R[0, 2] * (mz / scale)
+    fy = R[1, 0] * (mx / scale) + R[1, 1] * (my / scale) + R[1, 2] * (mz / scale)
+    fz = R[2, 0] * (mx / scale) + R[2, 1] * (my / scale) + R[2, 2] * (mz / scale)
+    s[S_MAG_SCALE] = scale
+    s[S_MAG_X] = math.atan2(fx, fy)
+    s[S_MAG_X + 1] = math.hypot(fx, fy)
+    s[S_MAG_X + 2] = fz
+    for i in range(3, 6):
+        s[S_MAG_X + i] = 0.0
+    for i in range(36):
+        s[S_MAG_P + i] = 0.0
+    s[S_MAG_P] = c[C_HEADING_SIGMA_INIT] * c[C_HEADING_SIGMA_INIT]
+    s[S_MAG_P + 7] = c[C_FIELD_SIGMA_INIT] * c[C_FIELD_SIGMA_INIT]
+    s[S_MAG_P + 14] = c[C_FIELD_SIGMA_INIT] * c[C_FIELD_SIGMA_INIT]
+    hi = c[C_HARD_IRON_INIT] * c[C_HARD_IRON_INIT]
+    s[S_MAG_P + 21] = hi
+    s[S_MAG_P + 28] = hi
+    s[S_MAG_P + 35] = hi
+    s[S_MAG_READY] = 1.0
 
 
 @njit(cache=True)
@@ -397,9 +458,8 @@ def polaris_kernel(
         gx, gy, gz = gyr[k, 0], gyr[k, 1], gyr[k, 2]
         ax, ay, az = acc[k, 0], acc[k, 1], acc[k, 2]
         # (P1) strapdown.
-        wx = (gx - s[S_BIAS]) * step
-        wy = (gy - s[S_BIAS + 1]) * step
-        wz = (gz - s[S_BIAS + 2]) * step
+        rx, ry, rz = gx - s[S_BIAS], gy - s[S_BIAS + 1], gz - s[S_BIAS + 2]
+        wx, wy, wz = rx * step, ry * step, rz * step
         angle = math.sqrt(wx * wx + wy * wy + wz * wz)
         if angle <= 1e-15:
             dw, dx, dy, dz = 1.0, 0.0, 0.0, 0.0
@@ -443,11 +503,15 @@ def polaris_kernel(
             s[S_REST_GYR_SUM + 2] += gz
             s[S_REST_COUNT] += 1.0
         # (P3) accelerometer in I, low-passed.
+        warm = 0.0
+        if s[S_WARMUP_COUNT] < c[C_WARMUP]:
+            warm = s[S_WARMUP_COUNT] + 1.0
+            s[S_WARMUP_COUNT] = warm
         if use_acc[k]:
             _rotation_matrix(w, x, y, z, R)
             for i in range(3):
                 a_i = R[i, 0] * ax + R[i, 1] * ay + R[i, 2] * az
-                s[S_ACC_LP + i] = _lp_step(c, a_i, s, S_ACC_LP_STATE + 2 * i)
+                s[S_ACC_LP + i] = _lowpass(c, a_i, s, S_ACC_LP + i, S_ACC_LP_STATE + 2 * i, warm)
         # (P4) drift integrals.
         q0, q1, q2, q3 = _qmul(
             s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3], w, x, y, z
@@ -458,10 +522,16 @@ def polaris_kernel(
             for jj in range(3):
                 s[S_DRIFT_J + 3 * i + jj] += R[i, jj] * step
             s[S_DRIFT_G + i] += (R[i, 0] * bx + R[i, 1] * by + R[i, 2] * bz) * step
+        for jj in range(3):
+            s[S_DRIFT_JZ + jj] += R[2, jj] * step
         for i in range(6):
-            s[S_DRIFT_J_LP + i] = _lp_step(c, s[S_DRIFT_J + i], s, S_DRIFT_J_LP_STATE + 2 * i)
+            s[S_DRIFT_J_LP + i] = _lowpass(
+                c, s[S_DRIFT_J + i], s, S_DRIFT_J_LP + i, S_DRIFT_J_LP_STATE + 2 * i, warm
+            )
         for i in range(2):
-            s[S_DRIFT_G_LP + i] = _lp_step(c, s[S_DRIFT_G + i], s, S_DRIFT_G_LP_STATE + 2 * i)
+            s[S_DRIFT_G_LP + i] = _lowpass(
+                c, s[S_DRIFT_G + i], s, S_DRIFT_G_LP + i, S_DRIFT_G_LP_STATE + 2 * i, warm
+            )
         # (P5) magnetometer.
         if has_mag and use_mag[k]:
             hp = S_HISTORY + 4 * ((pos - delay) % HISTORY_LEN)
@@ -472,26 +542,7 @@ def polaris_kernel(
             _rotation_matrix(m0, m1, m2, m3, R)
             mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
             if s[S_MAG_READY] == 0.0:
-                scale = math.sqrt(mx * mx + my * my + mz * mz)
-                fx = R[0, 0] * (mx / scale) + R[0, 1] * (my / scale) + R[0, 2] * (mz / scale)
-                fy = R[1, 0] * (mx / scale) + R[1, 1] * (my / scale) + R[1, 2] * (mz / scale)
-                fz = R[2, 0] * (mx / scale) + R[2, 1] * (my / scale) + R[2, 2] * (mz / scale)
-                s[S_MAG_SCALE] = scale
-                s[S_MAG_X] = math.atan2(fx, fy)
-                s[S_MAG_X + 1] = math.hypot(fx, fy)
-                s[S_MAG_X + 2] = fz
-                for i in range(3, 6):
-                    s[S_MAG_X + i] = 0.0
-                for i in range(36):
-                    s[S_MAG_P + i] = 0.0
-                s[S_MAG_P] = c[C_HEADING_SIGMA_INIT] * c[C_HEADING_SIGMA_INIT]
-                s[S_MAG_P + 7] = c[C_FIELD_SIGMA_INIT] * c[C_FIELD_SIGMA_INIT]
-                s[S_MAG_P + 14] = c[C_FIELD_SIGMA_INIT] * c[C_FIELD_SIGMA_INIT]
-                hi = c[C_HARD_IRON_INIT] * c[C_HARD_IRON_INIT]
-                s[S_MAG_P + 21] = hi
-                s[S_MAG_P + 28] = hi
-                s[S_MAG_P + 35] = hi
-                s[S_MAG_READY] = 1.0
+                _start_heading(c, s, R, mx, my, mz)
             scale = s[S_MAG_SCALE]
             ux, uy, uz = mx / scale, my / scale, mz / scale
             for i in range(3):
@@ -499,12 +550,16 @@ def polaris_kernel(
                 for jj in range(3):
                     s[S_MAG_R_SUM + 3 * i + jj] += R[i, jj]
             s[S_MAG_COUNT] += 1.0
+            s[S_MAG_RATE2_SUM] += rx * rx + ry * ry + rz * rz
         s[S_BLOCK_COUNT] += 1.0
         s[S_BLOCK_TIME] += step
         if s[S_BLOCK_COUNT] >= block:
             _tilt_update(c, s, Pt, R, scratch)
             if has_mag and s[S_MAG_READY] != 0.0:
                 _heading_update(c, s, Pm, Hm, PHm, Sm, Sim, nu)
+            s[S_DRIFT_JZ] = 0.0
+            s[S_DRIFT_JZ + 1] = 0.0
+            s[S_DRIFT_JZ + 2] = 0.0
             s[S_BLOCK_COUNT] = 0.0
             s[S_BLOCK_TIME] = 0.0
         q0, q1, q2, q3 = _qmul(
@@ -550,3 +605,48 @@ def strapdown_kernel(gyr: np.ndarray, bias: np.ndarray, dt: np.ndarray, out: np.
         n = math.sqrt(w * w + x * x + y * y + z * z)
         w, x, y, z = w / n, x / n, y / n, z / n
         out[k, 0], out[k, 1], out[k, 2], out[k, 3] = w, x, y, z
+
+
+@njit(cache=True)
+def heading_kernel(
+    c: np.ndarray,
+    s: np.ndarray,
+    q6: np.ndarray,
+    mag: np.ndarray,
+    dt: np.ndarray,
+    use_mag: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """The heading filter (P5, P11-P13) alone, on a given 6D orientation ``q6`` (N, 4)
+    (no delay, no bias term: the offline smoother's use); ``out`` (N, 2) receives
+    ``[delta, var(delta)]``. Uses only the heading fields of the flat state ``s``."""
+    block = c[C_BLOCK]
+    R = np.empty((3, 3))
+    Pm = np.empty((6, 6))
+    Hm = np.empty((3, 6))
+    PHm = np.empty((6, 3))
+    Sm = np.empty((3, 3))
+    Sim = np.empty((3, 3))
+    nu = np.empty(3)
+    for k in range(q6.shape[0]):
+        if use_mag[k]:
+            _rotation_matrix(q6[k, 0], q6[k, 1], q6[k, 2], q6[k, 3], R)
+            mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
+            if s[S_MAG_READY] == 0.0:
+                _start_heading(c, s, R, mx, my, mz)
+            scale = s[S_MAG_SCALE]
+            ux, uy, uz = mx / scale, my / scale, mz / scale
+            for i in range(3):
+                s[S_MAG_Y_SUM + i] += R[i, 0] * ux + R[i, 1] * uy + R[i, 2] * uz
+                for jj in range(3):
+                    s[S_MAG_R_SUM + 3 * i + jj] += R[i, jj]
+            s[S_MAG_COUNT] += 1.0
+        s[S_BLOCK_COUNT] += 1.0
+        s[S_BLOCK_TIME] += dt[k]
+        if s[S_BLOCK_COUNT] >= block:
+            if s[S_MAG_READY] != 0.0:
+                _heading_update(c, s, Pm, Hm, PHm, Sm, Sim, nu)
+            s[S_BLOCK_COUNT] = 0.0
+            s[S_BLOCK_TIME] = 0.0
+        out[k, 0] = s[S_MAG_X]
+        out[k, 1] = s[S_MAG_P] if s[S_MAG_READY] != 0.0 else 0.0

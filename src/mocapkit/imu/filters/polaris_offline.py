@@ -28,9 +28,15 @@ import numpy as np
 from scipy.signal import lfilter
 
 from mocapkit._validate import FloatArray
-from mocapkit.geometry import quat_conj, quat_from_two_vectors, quat_mul, quat_rotate
+from mocapkit.geometry import quat_from_two_vectors, quat_mul, quat_rotate
 from mocapkit.imu.filters import polaris_params as pp
-from mocapkit.imu.filters.polaris_engine import initial_tilt, run_pass, start, strapdown
+from mocapkit.imu.filters.polaris_engine import (
+    heading_pass,
+    initial_tilt,
+    run_pass,
+    start,
+    strapdown,
+)
 from mocapkit.imu.filters.polaris_params import PolarisCore, PolarisParams, butterworth2
 
 _UP = np.array([0.0, 0.0, 1.0])
@@ -93,13 +99,14 @@ def _one_pass(
     use_acc: np.ndarray,
     use_mag: np.ndarray,
     has_mag: bool,
-) -> tuple[FloatArray, FloatArray]:
+) -> FloatArray:
+    """One online pass in 6D (the bias is all the smoother takes from it); (N, 8) aux."""
     core = PolarisCore()
-    q_init = initial_tilt(acc, use_acc, params.rate_hz)
+    q_init = initial_tilt(acc, use_acc)
     first = int(np.flatnonzero(use_acc)[0])
     start(c, core, q_init, gyr[0], acc[first])
-    result = run_pass(c, core, backend, gyr, acc, mag, dt, use_acc, use_mag, has_mag, True)
-    return result.q9, result.aux
+    result = run_pass(c, core, backend, gyr, acc, mag, dt, use_acc, use_mag, False, True)
+    return result.aux
 
 
 def smooth(
@@ -123,13 +130,13 @@ def smooth(
         mag = np.concatenate([mag[delay:], np.repeat(mag[-1:], delay, axis=0)])
         use_mag = np.concatenate([use_mag[delay:], np.repeat(use_mag[-1:], delay)])
     # (O2) forward and backward passes.
-    q9_f, aux_f = _one_pass(params, c, backend, gyr, acc, mag, dt, use_acc, use_mag, has_mag)
+    aux_f = _one_pass(params, c, backend, gyr, acc, mag, dt, use_acc, use_mag, has_mag)
     gyr_b = np.zeros_like(gyr)
     gyr_b[1:] = -gyr[::-1][:-1]
     dt_b = np.empty_like(dt)
     dt_b[0] = dt[-1]
     dt_b[1:] = dt[::-1][:-1]
-    q9_b, aux_b = _one_pass(
+    aux_b = _one_pass(
         params,
         c,
         backend,
@@ -141,7 +148,6 @@ def smooth(
         np.ascontiguousarray(use_mag[::-1]),
         has_mag,
     )
-    q9_b = q9_b[::-1]
     aux_b = aux_b[::-1]
     # (O3) smoothed bias (the backward pass estimates -b).
     var_f = aux_f[:, 7:8]
@@ -155,17 +161,24 @@ def smooth(
     q6 = quat_mul(q_EI, q_IS)
     if not has_mag:
         return OfflineResult(q6, None, bias)
-    # (O5) heading: fuse the two passes' offsets from the smoothed 6D estimate.
-    var_hf = aux_f[:, 3]
-    var_hb = aux_b[:, 3]
-    ready_f = var_hf > 0.0  # the heading filter has started in that pass
-    ready_b = var_hb > 0.0
+    # (O5) heading: the heading filter forward and backward over the smoothed 6D
+    # orientation, fused by the variances of its heading offset.
+    fwd = heading_pass(c, backend, q6, mag, dt, use_mag)
+    bwd = heading_pass(
+        c,
+        backend,
+        np.ascontiguousarray(q6[::-1]),
+        np.ascontiguousarray(mag[::-1]),
+        np.ascontiguousarray(dt_b),
+        np.ascontiguousarray(use_mag[::-1]),
+    )[::-1]
+    var_f, var_b = fwd[:, 1], bwd[:, 1]
+    ready_f = var_f > 0.0  # the heading filter has started in that direction
+    ready_b = var_b > 0.0
     weight = np.zeros(n)
     both = ready_f & ready_b
-    weight[both] = var_hf[both] / (var_hf[both] + var_hb[both])
+    weight[both] = var_f[both] / (var_f[both] + var_b[both])
     weight[~ready_f & ready_b] = 1.0
-    psi_f = _heading_about_z(quat_mul(q9_f, quat_conj(q6)))
-    psi_b = _heading_about_z(quat_mul(q9_b, quat_conj(q6)))
-    diff = np.arctan2(np.sin(psi_b - psi_f), np.cos(psi_b - psi_f))
-    q9 = quat_mul(_heading_rotation(psi_f + weight * diff), q6)
+    diff = np.arctan2(np.sin(bwd[:, 0] - fwd[:, 0]), np.cos(bwd[:, 0] - fwd[:, 0]))
+    q9 = quat_mul(_heading_rotation(fwd[:, 0] + weight * diff), q6)
     return OfflineResult(q6, q9, bias)

@@ -69,7 +69,9 @@ class PolarisParams(FilterParams):
 
     Attributes:
         mag_noise: std of the block-mean field in E6 (relative to the field norm).
-        heading_process: random walk [rad/sqrt(s)] of ``delta`` (the 6D heading drifts).
+        heading_process: random walk [rad/sqrt(s)] of ``delta`` (the 6D heading drifts);
+            the bias uncertainty of the inclination filter adds ``Jz^T P_b Jz`` per update
+            (``Jz`` the block integral of the vertical row of ``R6``).
         field_process: random walk [1/sqrt(s)] of the relative field components.
         hard_iron_sigma_init: prior std of the hard-iron offset (relative): small, the
             magnetometer is assumed calibrated.
@@ -103,13 +105,14 @@ class PolarisParams(FilterParams):
     lag_compensation: bool = True
     mag_noise: float = 0.02
     heading_process: float = 0.1 * _DEG
-    field_process: float = 0.004
-    hard_iron_sigma_init: float = 2.5e-4
+    field_process: float = 0.00025
+    hard_iron_sigma_init: float = 1.25e-3
     hard_iron_sigma_reset: float = 1.0
-    mag_gate: float = 4.0
-    mag_reset_time: float = 1.0
+    mag_gate: float = 2.0
+    mag_reset_time: float = 0.5
     mag_delay_s: float = 0.0
-    offline_tau_acc: float = 3.0
+    mag_timing_sigma_s: float = 0.0
+    offline_tau_acc: float = 2.5
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -137,6 +140,7 @@ class PolarisParams(FilterParams):
             "field_process",
             "mag_reset_time",
             "mag_delay_s",
+            "mag_timing_sigma_s",
         )
         for name in positive:
             value = float(getattr(self, name))
@@ -204,7 +208,9 @@ C_MAG_DELAY = 24  # samples
 C_TILT_SIGMA_INIT = 25
 C_HEADING_SIGMA_INIT = 26
 C_FIELD_SIGMA_INIT = 27
-N_COEFFICIENTS = 28
+C_WARMUP = 28  # samples of running mean before the low-pass takes over
+C_MAG_TIMING = 29
+N_COEFFICIENTS = 30
 
 # Initial uncertainties the user does not tune: the first tilt comes from a short average
 # of the accelerometer (2 deg covers linear acceleration in it), the first heading from a
@@ -241,6 +247,8 @@ def coefficients(params: PolarisParams) -> FloatArray:
     c[C_TILT_SIGMA_INIT] = TILT_SIGMA_INIT
     c[C_HEADING_SIGMA_INIT] = HEADING_SIGMA_INIT
     c[C_FIELD_SIGMA_INIT] = FIELD_SIGMA_INIT
+    c[C_WARMUP] = max(1, round(params.tau_acc * params.rate_hz))
+    c[C_MAG_TIMING] = params.mag_timing_sigma_s
     return c
 
 
@@ -254,8 +262,10 @@ class PolarisCore:
     """Everything ``polaris`` carries between samples (named; see :data:`STATE_LAYOUT`).
 
     ``started`` is 0 until the first sample has set the tilt (``q_acc``) and the low-pass
-    memories; ``mag_ready`` is 0 until the first magnetometer sample has set the heading
-    filter. Matrices are stored row-major in flat arrays (``tilt_P`` is 5x5 over
+    memories; for the first ``tau_acc`` seconds (``warmup_count`` samples) the low-passes
+    are running means of all samples so far, so the start does not stay biased towards
+    the first reading; ``mag_ready`` is 0 until the first magnetometer sample has set the
+    heading filter. Matrices are stored row-major in flat arrays (``tilt_P`` is 5x5 over
     ``[tilt_x, tilt_y, bias_x, bias_y, bias_z]``, ``mag_P`` 6x6 over
     ``[delta, field_h, field_v, iron_x, iron_y, iron_z]``).
     """
@@ -272,6 +282,7 @@ class PolarisCore:
     drift_G: FloatArray = field(default_factory=lambda: _zeros(2))
     drift_G_lp_state: FloatArray = field(default_factory=lambda: _zeros(4))
     drift_G_lp: FloatArray = field(default_factory=lambda: _zeros(2))
+    drift_Jz: FloatArray = field(default_factory=lambda: _zeros(3))
     rest_gyr_lp: FloatArray = field(default_factory=lambda: _zeros(3))
     rest_acc_lp: FloatArray = field(default_factory=lambda: _zeros(3))
     rest_time: FloatArray = field(default_factory=lambda: _zeros(1))
@@ -284,10 +295,12 @@ class PolarisCore:
     mag_y_sum: FloatArray = field(default_factory=lambda: _zeros(3))
     mag_R_sum: FloatArray = field(default_factory=lambda: _zeros(9))
     mag_count: FloatArray = field(default_factory=lambda: _zeros(1))
+    mag_rate2_sum: FloatArray = field(default_factory=lambda: _zeros(1))
     mag_scale: FloatArray = field(default_factory=lambda: _zeros(1))
     mag_dist_time: FloatArray = field(default_factory=lambda: _zeros(1))
     mag_ready: FloatArray = field(default_factory=lambda: _zeros(1))
     started: FloatArray = field(default_factory=lambda: _zeros(1))
+    warmup_count: FloatArray = field(default_factory=lambda: _zeros(1))
     history_pos: FloatArray = field(default_factory=lambda: _zeros(1))
     q_gyr_history: FloatArray = field(
         default_factory=lambda: np.tile([1.0, 0.0, 0.0, 0.0], (MAX_MAG_DELAY_SAMPLES + 1, 1))
@@ -320,6 +333,7 @@ S_DRIFT_J_LP = _OFFSETS["drift_J_lp"]
 S_DRIFT_G = _OFFSETS["drift_G"]
 S_DRIFT_G_LP_STATE = _OFFSETS["drift_G_lp_state"]
 S_DRIFT_G_LP = _OFFSETS["drift_G_lp"]
+S_DRIFT_JZ = _OFFSETS["drift_Jz"]
 S_REST_GYR_LP = _OFFSETS["rest_gyr_lp"]
 S_REST_ACC_LP = _OFFSETS["rest_acc_lp"]
 S_REST_TIME = _OFFSETS["rest_time"]
@@ -332,10 +346,12 @@ S_MAG_P = _OFFSETS["mag_P"]
 S_MAG_Y_SUM = _OFFSETS["mag_y_sum"]
 S_MAG_R_SUM = _OFFSETS["mag_R_sum"]
 S_MAG_COUNT = _OFFSETS["mag_count"]
+S_MAG_RATE2_SUM = _OFFSETS["mag_rate2_sum"]
 S_MAG_SCALE = _OFFSETS["mag_scale"]
 S_MAG_DIST_TIME = _OFFSETS["mag_dist_time"]
 S_MAG_READY = _OFFSETS["mag_ready"]
 S_STARTED = _OFFSETS["started"]
+S_WARMUP_COUNT = _OFFSETS["warmup_count"]
 S_HISTORY_POS = _OFFSETS["history_pos"]
 S_HISTORY = _OFFSETS["q_gyr_history"]
 HISTORY_LEN = MAX_MAG_DELAY_SAMPLES + 1

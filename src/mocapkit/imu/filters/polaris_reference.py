@@ -9,7 +9,8 @@ Per sample, with the bias-corrected rate ``w = gyr - b``:
 - (P1) strapdown: ``q_gyr <- q_gyr * exp(w dt / 2)`` (the almost-inertial frame I);
 - (P2) rest detector: deviations of gyr/acc from 1st-order low-passes below thresholds
   for ``rest_min_time``; at rest the gyroscope readings are summed for (P9);
-- (P3) accelerometer in I, low-passed (2nd-order Butterworth, ``tau_acc``): ``a_I``;
+- (P3) accelerometer in I, low-passed (2nd-order Butterworth, ``tau_acc``): ``a_I``
+  (for the first ``tau_acc`` seconds the running mean, so the start converges fast);
 - (P4) drift integrals for the lag model: ``J += R6[:2] dt`` and ``G += R6[:2] b dt``
   (``R6`` the 6D rotation matrix), both also low-passed with the same Butterworth;
 - (P5) magnetometer (9D): the field in E6 using the orientation ``mag_delay`` samples
@@ -33,8 +34,11 @@ Heading (9D), extended Kalman filter, state ``[delta, f_h, f_v, h_x, h_y, h_z]``
 units): the block-mean field in E6 is modelled as ``[f_h sin delta, f_h cos delta, f_v] +
 mean(R6_delayed) h``:
 
-- (P11) propagate: random walks on ``delta`` and the field;
-- (P12) Mahalanobis gate ``nu^T S^-1 nu <= gate^2``; accepted: standard EKF update;
+- (P11) propagate: random walks on ``delta`` and the field, plus the heading drift the
+  bias uncertainty allows, ``Jz^T P_b Jz`` (``Jz`` the block integral of ``R6[2]``);
+- (P12) Mahalanobis gate ``nu^T S^-1 nu <= gate^2`` (the measurement noise is
+  ``mag_noise^2 + (mag_timing_sigma_s |w|)^2``, ``|w|^2`` the block mean); accepted:
+  standard EKF update;
 - (P13) rejected for ``mag_reset_time``: the hard-iron covariance is reset to
   ``hard_iron_sigma_reset^2`` (a magnet now moves with the sensor) so it is re-learnt while
   the heading is carried by the gyroscope.
@@ -82,6 +86,20 @@ def _butterworth_step(c: FloatArray, x: FloatArray, state: FloatArray) -> FloatA
     return y
 
 
+def _lowpass_step(
+    c: FloatArray, x: FloatArray, y: FloatArray, state: FloatArray, warmup: float
+) -> FloatArray:
+    """The low-pass of (P3)/(P4): while ``warmup`` (the sample count, 0 when done) runs,
+    the running mean ``y + (x - y) / warmup``, whose last value seeds the Butterworth
+    memory; then the Butterworth. ``state`` (k, 2) is updated in place."""
+    if warmup > 0.0:
+        out = y + (x - y) / warmup
+        if warmup >= c[pp.C_WARMUP]:
+            state[:, :] = butterworth_steady_state(c, out)
+        return out
+    return _butterworth_step(c, x, state)
+
+
 def butterworth_steady_state(c: FloatArray, value: FloatArray) -> FloatArray:
     """Low-pass memory (k, 2) whose output stays at ``value`` (k,) for a constant input."""
     b1, b2, a1, a2 = c[pp.C_B1], c[pp.C_B2], c[pp.C_A1], c[pp.C_A2]
@@ -108,6 +126,9 @@ def start_core(
     a_I = quat_to_matrix(core.q_acc).T @ (_UP * a_norm)
     core.acc_lp = a_I.copy()
     core.acc_lp_state = butterworth_steady_state(c, a_I).reshape(-1)
+    core.warmup_count = np.array([1.0])  # q_init counts as the first sample of the mean
+    core.drift_J_lp = np.zeros(6)
+    core.drift_G_lp = np.zeros(2)
     core.rest_gyr_lp = np.asarray(gyr0, dtype=np.float64).copy()
     core.rest_acc_lp = np.asarray(acc0, dtype=np.float64).copy()
     P = np.zeros((5, 5))
@@ -155,15 +176,19 @@ def _rest_detector(
         core.rest_count = core.rest_count + 1.0
 
 
-def _accumulate_drift(c: FloatArray, core: PolarisCore, R6: FloatArray, dt: float) -> None:
-    """(P4) ``J += R6[:2] dt``, ``G += R6[:2] b dt`` and their low-passes."""
+def _accumulate_drift(
+    c: FloatArray, core: PolarisCore, R6: FloatArray, dt: float, warmup: float
+) -> None:
+    """(P4) ``J += R6[:2] dt``, ``G += R6[:2] b dt`` and their low-passes (the same filter
+    as the accelerometer's, warm-up included, so the lag model stays exact)."""
     core.drift_J = core.drift_J + R6[:2, :].reshape(-1) * dt
     core.drift_G = core.drift_G + (R6[:2, :] @ core.bias) * dt
+    core.drift_Jz = core.drift_Jz + R6[2, :] * dt
     j_state = core.drift_J_lp_state.reshape(6, 2)
-    core.drift_J_lp = _butterworth_step(c, core.drift_J, j_state)
+    core.drift_J_lp = _lowpass_step(c, core.drift_J, core.drift_J_lp, j_state, warmup)
     core.drift_J_lp_state = j_state.reshape(-1)
     g_state = core.drift_G_lp_state.reshape(2, 2)
-    core.drift_G_lp = _butterworth_step(c, core.drift_G, g_state)
+    core.drift_G_lp = _lowpass_step(c, core.drift_G, core.drift_G_lp, g_state, warmup)
     core.drift_G_lp_state = g_state.reshape(-1)
 
 
@@ -225,14 +250,16 @@ def _tilt_update(c: FloatArray, core: PolarisCore) -> None:
         innovation = z - H @ x
         PHt = P @ H.T
         S = H @ PHt + np.eye(2) * sigma**2
-        K = PHt @ np.linalg.inv(S)
-        x = x + K @ innovation
-        P = P - K @ PHt.T
+        if np.linalg.det(S) > 0.0:  # positive definite unless the state has broken down
+            K = PHt @ np.linalg.inv(S)
+            x = x + K @ innovation
+            P = P - K @ PHt.T
     # (P10) apply the correction; the error state returns to zero.
     correction = _exp_rotvec(np.array([x[0], x[1], 0.0]))
     core.q_acc = _normalized(quat_mul(correction, core.q_acc))
     core.bias = core.bias + x[2:5]
-    core.tilt_P = P.reshape(-1)
+    # Symmetrise: rounding makes P slightly asymmetric and the asymmetry would grow.
+    core.tilt_P = (0.5 * (P + P.T)).reshape(-1)
     # Rebase the drift integrals (only differences to their low-passes matter): subtracting
     # a constant from the input and the steady state of that constant from the memory
     # shifts the low-pass output by exactly that constant.
@@ -253,8 +280,10 @@ def _heading_update(c: FloatArray, core: PolarisCore) -> None:
     T = float(core.block_time[0])
     P = core.mag_P.reshape(6, 6).copy()
     x = core.mag_x.copy()
-    # (P11) random walks.
-    P[0, 0] += c[pp.C_HEADING_PROCESS] ** 2 * T
+    # (P11) random walks; the heading also inherits the bias uncertainty of (P6)-(P10).
+    jz = core.drift_Jz
+    P_bias = core.tilt_P.reshape(5, 5)[2:5, 2:5]
+    P[0, 0] += c[pp.C_HEADING_PROCESS] ** 2 * T + float(jz @ P_bias @ jz)
     P[1, 1] += c[pp.C_FIELD_PROCESS] ** 2 * T
     P[2, 2] += c[pp.C_FIELD_PROCESS] ** 2 * T
     count = float(core.mag_count[0])
@@ -270,9 +299,12 @@ def _heading_update(c: FloatArray, core: PolarisCore) -> None:
         H[2, 2] = 1.0
         H[:, 3:6] = R_mean
         PHt = P @ H.T
-        S = H @ PHt + np.eye(3) * c[pp.C_MAG_NOISE] ** 2
-        S_inv = np.linalg.inv(S)
-        d2 = float(nu @ S_inv @ nu)
+        rate2 = float(core.mag_rate2_sum[0]) / count
+        S = H @ PHt + np.eye(3) * (c[pp.C_MAG_NOISE] ** 2 + c[pp.C_MAG_TIMING] ** 2 * rate2)
+        # A broken-down state (S not positive definite) counts as rejected.
+        positive = np.linalg.det(S) > 0.0
+        S_inv = np.linalg.inv(S) if positive else np.zeros((3, 3))
+        d2 = float(nu @ S_inv @ nu) if positive else math.inf
         # (P12) gate.
         if d2 <= c[pp.C_MAG_GATE] ** 2:
             K = PHt @ S_inv
@@ -291,10 +323,11 @@ def _heading_update(c: FloatArray, core: PolarisCore) -> None:
             core.mag_dist_time = np.array([dist])
     x[0] = math.atan2(math.sin(x[0]), math.cos(x[0]))
     core.mag_x = x
-    core.mag_P = P.reshape(-1)
+    core.mag_P = (0.5 * (P + P.T)).reshape(-1)
     core.mag_y_sum = np.zeros(3)
     core.mag_R_sum = np.zeros(9)
     core.mag_count = np.array([0.0])
+    core.mag_rate2_sum = np.array([0.0])
 
 
 def run_reference(
@@ -337,15 +370,18 @@ def run_reference(
         core.history_pos = np.array([float((pos + 1) % hist_len)])
         # (P2) rest detector.
         _rest_detector(c, core, gyr[k], acc[k], step, bool(use_acc[k]))
-        # (P3) accelerometer in I, low-passed.
+        # (P3) accelerometer in I, low-passed (a running mean while warming up).
+        count = core.warmup_count[0] + 1.0 if core.warmup_count[0] < c[pp.C_WARMUP] else 0.0
+        if count > 0.0:
+            core.warmup_count = np.array([count])
         if use_acc[k]:
             a_I = quat_to_matrix(core.q_gyr) @ acc[k]
             state = core.acc_lp_state.reshape(3, 2)
-            core.acc_lp = _butterworth_step(c, a_I, state)
+            core.acc_lp = _lowpass_step(c, a_I, core.acc_lp, state, count)
             core.acc_lp_state = state.reshape(-1)
         # (P4) drift integrals.
         q6 = quat_mul(core.q_acc, core.q_gyr)
-        _accumulate_drift(c, core, quat_to_matrix(q6), step)
+        _accumulate_drift(c, core, quat_to_matrix(q6), step, count)
         # (P5) magnetometer, compared with the orientation `delay` samples earlier.
         if has_mag and use_mag[k]:
             q_past = core.q_gyr_history[(pos - delay) % hist_len]
@@ -355,12 +391,14 @@ def run_reference(
             core.mag_y_sum = core.mag_y_sum + R_mag @ (mag[k] / core.mag_scale[0])
             core.mag_R_sum = core.mag_R_sum + R_mag.reshape(-1)
             core.mag_count = core.mag_count + 1.0
+            core.mag_rate2_sum = core.mag_rate2_sum + float(rate @ rate)
         core.block_count = core.block_count + 1.0
         core.block_time = core.block_time + step
         if core.block_count[0] >= block:
             _tilt_update(c, core)
             if has_mag and core.mag_ready[0] != 0.0:
                 _heading_update(c, core)
+            core.drift_Jz = np.zeros(3)
             core.block_count = np.array([0.0])
             core.block_time = np.array([0.0])
         q6 = quat_mul(core.q_acc, core.q_gyr)
@@ -377,3 +415,35 @@ def strapdown_reference(gyr: FloatArray, bias: FloatArray, dt: FloatArray, out: 
     for k in range(gyr.shape[0]):
         q = _normalized(quat_mul(q, _exp_rotvec((gyr[k] - bias[k]) * dt[k])))
         out[k] = q
+
+
+def heading_pass_reference(
+    c: FloatArray,
+    core: PolarisCore,
+    q6: FloatArray,
+    mag: FloatArray,
+    dt: FloatArray,
+    use_mag: np.ndarray,
+    out: FloatArray,
+) -> None:
+    """The heading filter (P5, P11-P13) alone on a given 6D orientation ``q6`` (N, 4) (no
+    delay; ``core.tilt_P`` and ``drift_Jz`` are zero, so no bias term); ``out`` (N, 2)
+    receives ``[delta, var(delta)]``."""
+    block = c[pp.C_BLOCK]
+    for k in range(q6.shape[0]):
+        if use_mag[k]:
+            R = quat_to_matrix(q6[k])
+            if core.mag_ready[0] == 0.0:
+                _start_heading(c, core, R, mag[k])
+            core.mag_y_sum = core.mag_y_sum + R @ (mag[k] / core.mag_scale[0])
+            core.mag_R_sum = core.mag_R_sum + R.reshape(-1)
+            core.mag_count = core.mag_count + 1.0
+        core.block_count = core.block_count + 1.0
+        core.block_time = core.block_time + float(dt[k])
+        if core.block_count[0] >= block:
+            if core.mag_ready[0] != 0.0:
+                _heading_update(c, core)
+            core.block_count = np.array([0.0])
+            core.block_time = np.array([0.0])
+        out[k, 0] = core.mag_x[0]
+        out[k, 1] = core.mag_P[0] if core.mag_ready[0] != 0.0 else 0.0
