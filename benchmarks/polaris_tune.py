@@ -37,40 +37,31 @@ from mocapkit.io.broad import BroadTrial, list_broad_trials, read_broad_trial
 DEFAULT_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "broad"
 DEG = math.pi / 180.0
 
-# Where tuning starts: orders of magnitude from the sensor physics, not from BROAD.
+# Where tuning starts, and the values that are not tuned at all: orders of magnitude from
+# the sensor physics, not from BROAD.
 INITIAL_GUESS: dict[str, float] = {
+    # -- tuned (6D) --
     "tau_acc": 3.0,  # a few seconds average out human linear accelerations
-    "tilt_noise": 0.5 * DEG,  # ~0.05 m/s^2 of residual linear acceleration / g
     "tilt_noise_rest": 0.05 * DEG,
     "tilt_process": 0.002 * DEG,  # gyroscope angle random walk is ~0.006 deg/sqrt(s)
     "bias_process": 0.0005 * DEG,
     "bias_noise_rest": 0.05 * DEG,  # gyro noise 0.1 deg/s per sample, block of 6
-    "mag_noise": 0.02,  # 0.7 uT per axis of a 44 uT field
-    "mag_timing_sigma_s": 0.002,  # jitter of a ~200 Hz magnetometer in a faster stream
+    # -- tuned (9D) --
     "heading_process": 0.05 * DEG,
     "field_process": 0.0005,
-    "hard_iron_sigma_init": 0.01,  # 1 % of the field left by a calibration
-    "mag_gate": 4.0,
-    "mag_reset_time": 2.0,
+    # -- fixed --
+    # The 6D filter depends (almost) only on ratios of its noises: tilt_noise sets the
+    # scale (~0.02 m/s^2 of residual linear acceleration / g) and is not tuned.
+    "tilt_noise": 0.125 * DEG,
+    "mag_noise": 0.02,  # 0.7 uT per axis of a 44 uT field, averaged, plus ~0.5 uT of field
+    "mag_gate": 3.0,  # a 3-sigma gate
+    "mag_reset_time": 1.0,  # a magnet attached for 1 s is there to stay
+    "mag_timing_sigma_s": 0.002,  # hold jitter of a ~200 Hz magnetometer + delay rounding
+    "hard_iron_sigma_init": 0.001,  # a calibrated magnetometer (0.04 uT of 44)
     "offline_tau_acc": 3.0,
 }
-PARAMS_6D = (
-    "tau_acc",
-    "tilt_noise",
-    "tilt_process",
-    "bias_process",
-    "tilt_noise_rest",
-    "bias_noise_rest",
-)
-PARAMS_9D = (
-    "mag_noise",
-    "mag_timing_sigma_s",
-    "heading_process",
-    "field_process",
-    "hard_iron_sigma_init",
-    "mag_gate",
-    "mag_reset_time",
-)
+PARAMS_6D = ("tau_acc", "tilt_process", "bias_process", "tilt_noise_rest", "bias_noise_rest")
+PARAMS_9D = ("heading_process", "field_process")
 OFFLINE_TAU_GRID = (1.5, 2.0, 2.5, 3.0, 4.0)
 
 

