@@ -5,8 +5,7 @@
 Both filters run online (VQF: ``VQF.updateBatch``, C++) and offline (``offlineVQF``) in 9D
 and 6D on every trial; errors with BROAD's metric (:mod:`mocapkit.imu.metrics`: 9D total
 RMSE, 6D inclination RMSE and heading-aligned total, over the movement phases).
-``polaris`` uses its defaults plus the magnetometer delay estimated from the IMU data
-alone (:func:`~mocapkit.imu.filters.polaris_timing.estimate_mag_delay`, no reference).
+``polaris`` runs with its defaults, VQF with its own.
 
 Throughput: samples per second of one thread over all trials (best of ``--repeat``),
 after a warm-up run (numba compilation excluded). Peers are imported here only.
@@ -24,7 +23,6 @@ import numpy as np
 
 from mocapkit.errors import MissingDependencyError
 from mocapkit.imu.filters import Polaris
-from mocapkit.imu.filters.polaris_timing import estimate_mag_delay
 from mocapkit.imu.metrics import orientation_rmse
 from mocapkit.io.broad import BroadTrial, list_broad_trials, read_broad_trial
 
@@ -55,9 +53,9 @@ def _arrays(trial: BroadTrial) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     )
 
 
-def run_polaris(trial: BroadTrial, delay: float, offline: bool) -> tuple[np.ndarray, np.ndarray]:
+def run_polaris(trial: BroadTrial, offline: bool) -> tuple[np.ndarray, np.ndarray]:
     g, a, m = _arrays(trial)
-    f = Polaris(rate_hz=trial.rate_hz, mag_delay_s=delay)
+    f = Polaris(rate_hz=trial.rate_hz)
     if offline:
         result = f.smooth(g, a, m)
         assert result.q9 is not None
@@ -93,12 +91,10 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args()
     trials = [read_broad_trial(p) for p in list_broad_trials(args.data)]
-    delay = float(np.median([estimate_mag_delay(t.imu.gyr, t.imu.mag, t.rate_hz) for t in trials]))
-    print(f"magnetometer delay estimated from the IMU data: {delay * 1e3:.1f} ms\n")
     cols = ("polaris online", "polaris offline", "vqf online", "vqf offline")
     runners: dict[str, Callable[[BroadTrial], tuple[np.ndarray, np.ndarray]]] = {
-        "polaris online": lambda t: run_polaris(t, delay, False),
-        "polaris offline": lambda t: run_polaris(t, delay, True),
+        "polaris online": lambda t: run_polaris(t, False),
+        "polaris offline": lambda t: run_polaris(t, True),
         "vqf online": lambda t: run_vqf(t, False),
         "vqf offline": lambda t: run_vqf(t, True),
     }
@@ -122,7 +118,7 @@ def main() -> None:
 
     def polaris_all(mode: str) -> None:
         for g, a, m, rate in data:
-            f = Polaris(rate_hz=rate, mag_delay_s=delay)
+            f = Polaris(rate_hz=rate)
             if mode == "9d":
                 f.run(g, a, m)
             elif mode == "6d":

@@ -99,15 +99,17 @@ def heading_pass(
     backend: str,
     q6: FloatArray,
     mag: FloatArray,
+    rate2: FloatArray,
     dt: FloatArray,
     use_mag: np.ndarray,
 ) -> FloatArray:
-    """The heading filter alone over a given 6D orientation: (N, 2) ``[delta, var]``."""
+    """The heading filter alone over a given 6D orientation and squared angular rates:
+    (N, 2) ``[delta, var]``."""
     core = PolarisCore()
     out = np.empty((q6.shape[0], 2))
     if backend == "fast":
         flat = pack_state(core)
-        heading_kernel(c, flat, np.ascontiguousarray(q6), mag, dt, use_mag, out)
+        heading_kernel(c, flat, np.ascontiguousarray(q6), mag, rate2, dt, use_mag, out)
     else:
-        heading_pass_reference(c, core, q6, mag, dt, use_mag, out)
+        heading_pass_reference(c, core, q6, mag, rate2, dt, use_mag, out)
     return out

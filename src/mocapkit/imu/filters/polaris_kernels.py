@@ -613,13 +613,15 @@ def heading_kernel(
     s: np.ndarray,
     q6: np.ndarray,
     mag: np.ndarray,
+    rate2: np.ndarray,
     dt: np.ndarray,
     use_mag: np.ndarray,
     out: np.ndarray,
 ) -> None:
-    """The heading filter (P5, P11-P13) alone, on a given 6D orientation ``q6`` (N, 4)
-    (no delay, no bias term: the offline smoother's use); ``out`` (N, 2) receives
-    ``[delta, var(delta)]``. Uses only the heading fields of the flat state ``s``."""
+    """The heading filter (P5, P11-P13) alone, on a given 6D orientation ``q6`` (N, 4) and
+    squared angular rates ``rate2`` (N,) [rad^2/s^2] (no delay, no bias term: the offline
+    smoother's use); ``out`` (N, 2) receives ``[delta, var(delta)]``. Uses only the
+    heading fields of the flat state ``s``."""
     block = c[C_BLOCK]
     R = np.empty((3, 3))
     Pm = np.empty((6, 6))
@@ -641,6 +643,7 @@ def heading_kernel(
                 for jj in range(3):
                     s[S_MAG_R_SUM + 3 * i + jj] += R[i, jj]
             s[S_MAG_COUNT] += 1.0
+            s[S_MAG_RATE2_SUM] += rate2[k]
         s[S_BLOCK_COUNT] += 1.0
         s[S_BLOCK_TIME] += dt[k]
         if s[S_BLOCK_COUNT] >= block:

@@ -15,8 +15,9 @@ the bias estimate trails. Offline all samples are known:
    the accelerometer in I is low-passed *zero-phase* (the Butterworth of
    ``offline_tau_acc`` run forward then backward, no lag), and the inclination at each
    sample is the rotation that brings that low-passed vertical onto up;
-5. (O5) 9D: the forward and backward heading offsets of the passes, measured against the
-   smoothed 6D orientation, are fused by their variances (a pass whose magnetometer was
+5. (O5) 9D: the heading filter of the online mode (P11-P13, with the timing noise of the
+   bias-corrected rates) runs forward and backward over the smoothed 6D orientation; the
+   two heading offsets are fused by their variances (the direction whose magnetometer was
    rejected for a while has the larger variance there).
 """
 
@@ -163,12 +164,15 @@ def smooth(
         return OfflineResult(q6, None, bias)
     # (O5) heading: the heading filter forward and backward over the smoothed 6D
     # orientation, fused by the variances of its heading offset.
-    fwd = heading_pass(c, backend, q6, mag, dt, use_mag)
+    rate = gyr - bias
+    rate2 = np.einsum("ij,ij->i", rate, rate)
+    fwd = heading_pass(c, backend, q6, mag, rate2, dt, use_mag)
     bwd = heading_pass(
         c,
         backend,
         np.ascontiguousarray(q6[::-1]),
         np.ascontiguousarray(mag[::-1]),
+        np.ascontiguousarray(rate2[::-1]),
         np.ascontiguousarray(dt_b),
         np.ascontiguousarray(use_mag[::-1]),
     )[::-1]

@@ -422,13 +422,14 @@ def heading_pass_reference(
     core: PolarisCore,
     q6: FloatArray,
     mag: FloatArray,
+    rate2: FloatArray,
     dt: FloatArray,
     use_mag: np.ndarray,
     out: FloatArray,
 ) -> None:
-    """The heading filter (P5, P11-P13) alone on a given 6D orientation ``q6`` (N, 4) (no
-    delay; ``core.tilt_P`` and ``drift_Jz`` are zero, so no bias term); ``out`` (N, 2)
-    receives ``[delta, var(delta)]``."""
+    """The heading filter (P5, P11-P13) alone on a given 6D orientation ``q6`` (N, 4) and
+    squared angular rates ``rate2`` (N,) (no delay; ``core.tilt_P`` and ``drift_Jz`` are
+    zero, so no bias term); ``out`` (N, 2) receives ``[delta, var(delta)]``."""
     block = c[pp.C_BLOCK]
     for k in range(q6.shape[0]):
         if use_mag[k]:
@@ -438,6 +439,7 @@ def heading_pass_reference(
             core.mag_y_sum = core.mag_y_sum + R @ (mag[k] / core.mag_scale[0])
             core.mag_R_sum = core.mag_R_sum + R.reshape(-1)
             core.mag_count = core.mag_count + 1.0
+            core.mag_rate2_sum = core.mag_rate2_sum + float(rate2[k])
         core.block_count = core.block_count + 1.0
         core.block_time = core.block_time + float(dt[k])
         if core.block_count[0] >= block:
