@@ -11,13 +11,19 @@ Design (details, equations and the measured value of each part on BROAD in
   not), with a measurement model that includes the lag of that low-pass behind the tilt a
   bias error causes; rest detection adds direct bias measurements;
 - heading: a 6-state extended Kalman filter on the heading offset, the Earth field and a
-  hard-iron offset, fed with the block-mean field in E6 compared with the orientation
-  ``mag_delay_s`` earlier (the magnetometer's latency), with a Mahalanobis gate; a field
-  that stays inconsistent makes the filter re-learn the hard iron (a magnet attached to
-  the sensor) while the gyroscope carries the heading;
-- offline (:meth:`Polaris.run_offline`): forward and backward passes, their biases and
-  headings fused by their variances, and a zero-phase low-pass of the accelerometer in the
-  smoothed strapdown frame (:mod:`mocapkit.imu.filters.polaris_offline`).
+  hard-iron offset, fed with the block-mean field in E6, with a noise that grows with the
+  angular rate (the magnetometer's uncertain timing; its latency ``mag_delay_s`` can also
+  be compensated) and a Mahalanobis gate; a field that stays inconsistent makes the filter
+  re-learn the hard iron (a magnet attached to the sensor) while the gyroscope carries the
+  heading;
+- offline (:meth:`Polaris.run_offline`): forward and backward passes fused into a smoothed
+  bias, a zero-phase low-pass of the accelerometer in the smoothed strapdown frame, and the
+  heading filter forward and backward fused by variances
+  (:mod:`mocapkit.imu.filters.polaris_offline`).
+
+Time steps: the gyroscope integration, the drift integrals and the process noises use
+each sample's ``dt`` (dropped samples are integrated over their true length); the
+low-pass coefficients are those of the nominal ``rate_hz``.
 
 The reference implementation is :mod:`mocapkit.imu.filters.polaris_reference`, the numba
 fast path :mod:`mocapkit.imu.filters.polaris_kernels`; parameters and state in
