@@ -7,8 +7,9 @@ and 6D on every trial; errors with BROAD's metric (:mod:`mocapkit.imu.metrics`: 
 RMSE, 6D inclination RMSE and heading-aligned total, over the movement phases).
 ``polaris`` runs with its defaults, VQF with its own.
 
-Throughput: samples per second of one thread over all trials (best of ``--repeat``),
-after a warm-up run (numba compilation excluded). Peers are imported here only.
+Throughput: samples per second of one thread over all trials (best of ``--repeat`` rounds,
+the filters interleaved), after a warm-up run (numba compilation excluded); ``run()``
+includes the common input validation of the filter base. Peers are imported here only.
 """
 
 from __future__ import annotations
@@ -74,21 +75,27 @@ def run_vqf(trial: BroadTrial, offline: bool) -> tuple[np.ndarray, np.ndarray]:
     return out["quat9D"], out["quat6D"]
 
 
-def throughput(fn: Callable[[], object], n_samples: int, repeat: int) -> float:
-    """Samples per second, best of ``repeat`` (after one warm-up call)."""
-    fn()
-    best = math.inf
-    for _ in range(repeat):
-        t0 = time.perf_counter()
+def throughputs(
+    fns: dict[str, Callable[[], object]], n_samples: int, repeat: int
+) -> dict[str, float]:
+    """Samples per second of each function, best of ``repeat`` rounds that run every
+    function once in turn (so a busy moment of the machine hits all alike); one warm-up
+    call each first."""
+    for fn in fns.values():
         fn()
-        best = min(best, time.perf_counter() - t0)
-    return n_samples / best
+    best = dict.fromkeys(fns, math.inf)
+    for _ in range(repeat):
+        for name, fn in fns.items():
+            t0 = time.perf_counter()
+            fn()
+            best[name] = min(best[name], time.perf_counter() - t0)
+    return {name: n_samples / t for name, t in best.items()}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA)
-    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--repeat", type=int, default=7)
     args = parser.parse_args()
     trials = [read_broad_trial(p) for p in list_broad_trials(args.data)]
     cols = ("polaris online", "polaris offline", "vqf online", "vqf offline")
@@ -137,12 +144,14 @@ def main() -> None:
 
     print("Throughput [million samples/s, one thread]\n")
     print("| filter | 9D online | 6D online | 9D offline |\n|---|---:|---:|---:|")
+    fns: dict[str, Callable[[], object]] = {}
     for name, fn in (("polaris (numba)", polaris_all), ("vqf (C++)", vqf_all)):
-        rates = [
-            throughput(lambda f=fn, m=mode: f(m), n, args.repeat) / 1e6  # type: ignore[misc]
-            for mode in ("9d", "6d", "offline")
-        ]
-        print(f"| {name} | " + " | ".join(f"{r:.2f}" for r in rates) + " |")
+        for mode in ("9d", "6d", "offline"):
+            fns[f"{name}|{mode}"] = lambda f=fn, m=mode: f(m)  # type: ignore[misc]
+    rates = throughputs(fns, n, args.repeat)
+    for name in ("polaris (numba)", "vqf (C++)"):
+        row = [rates[f"{name}|{mode}"] / 1e6 for mode in ("9d", "6d", "offline")]
+        print(f"| {name} | " + " | ".join(f"{r:.2f}" for r in row) + " |")
 
 
 if __name__ == "__main__":

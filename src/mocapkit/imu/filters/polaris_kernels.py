@@ -453,6 +453,7 @@ def polaris_kernel(
     Sim = np.empty((3, 3))
     nu = np.empty(3)
     scratch = np.empty(15)
+    hc, hs = math.cos(0.5 * s[S_MAG_X]), math.sin(0.5 * s[S_MAG_X])  # Rz(delta), cached
     for k in range(gyr.shape[0]):
         step = dt[k]
         gx, gy, gz = gyr[k, 0], gyr[k, 1], gyr[k, 2]
@@ -534,15 +535,17 @@ def polaris_kernel(
             )
         # (P5) magnetometer.
         if has_mag and use_mag[k]:
-            hp = S_HISTORY + 4 * ((pos - delay) % HISTORY_LEN)
-            m0, m1, m2, m3 = _qmul(
-                s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3],
-                s[hp], s[hp + 1], s[hp + 2], s[hp + 3],
-            )  # fmt: skip
-            _rotation_matrix(m0, m1, m2, m3, R)
+            if delay > 0:  # else R already holds R6 = R(q_acc * q_gyr), the same numbers
+                hp = S_HISTORY + 4 * ((pos - delay) % HISTORY_LEN)
+                m0, m1, m2, m3 = _qmul(
+                    s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3],
+                    s[hp], s[hp + 1], s[hp + 2], s[hp + 3],
+                )  # fmt: skip
+                _rotation_matrix(m0, m1, m2, m3, R)
             mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
             if s[S_MAG_READY] == 0.0:
                 _start_heading(c, s, R, mx, my, mz)
+                hc, hs = math.cos(0.5 * s[S_MAG_X]), math.sin(0.5 * s[S_MAG_X])
             scale = s[S_MAG_SCALE]
             ux, uy, uz = mx / scale, my / scale, mz / scale
             for i in range(3):
@@ -557,21 +560,20 @@ def polaris_kernel(
             _tilt_update(c, s, Pt, R, scratch)
             if has_mag and s[S_MAG_READY] != 0.0:
                 _heading_update(c, s, Pm, Hm, PHm, Sm, Sim, nu)
+                hc, hs = math.cos(0.5 * s[S_MAG_X]), math.sin(0.5 * s[S_MAG_X])
+            q0, q1, q2, q3 = _qmul(
+                s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3],
+                s[S_Q_GYR], s[S_Q_GYR + 1], s[S_Q_GYR + 2], s[S_Q_GYR + 3],
+            )  # fmt: skip
             s[S_DRIFT_JZ] = 0.0
             s[S_DRIFT_JZ + 1] = 0.0
             s[S_DRIFT_JZ + 2] = 0.0
             s[S_BLOCK_COUNT] = 0.0
             s[S_BLOCK_TIME] = 0.0
-        q0, q1, q2, q3 = _qmul(
-            s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3],
-            s[S_Q_GYR], s[S_Q_GYR + 1], s[S_Q_GYR + 2], s[S_Q_GYR + 3],
-        )  # fmt: skip
+        # q6 = q_acc * q_gyr: from (P4), or recomputed above after a block update.
         out6[k, 0], out6[k, 1], out6[k, 2], out6[k, 3] = q0, q1, q2, q3
         if s[S_MAG_READY] != 0.0:
-            delta = s[S_MAG_X]
-            h0, h1, h2, h3 = _qmul(
-                math.cos(0.5 * delta), 0.0, 0.0, math.sin(0.5 * delta), q0, q1, q2, q3
-            )
+            h0, h1, h2, h3 = _qmul(hc, 0.0, 0.0, hs, q0, q1, q2, q3)
             out9[k, 0], out9[k, 1], out9[k, 2], out9[k, 3] = h0, h1, h2, h3
         else:
             out9[k, 0], out9[k, 1], out9[k, 2], out9[k, 3] = q0, q1, q2, q3
