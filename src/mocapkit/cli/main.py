@@ -19,8 +19,10 @@ from mocapkit.errors import MissingDependencyError, MocapkitError
 
 # Each module adds one command group with ``register(subparsers)``.
 _COMMAND_MODULES: tuple[str, ...] = (
+    "mocapkit.cli.body_cmd",
     "mocapkit.cli.demo_cmd",
     "mocapkit.cli.imu_cmd",
+    "mocapkit.cli.suit_cmd",
     "mocapkit.cli.teleop_cmd",
 )
 
