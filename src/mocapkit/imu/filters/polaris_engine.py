@@ -13,7 +13,8 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.errors import DataError
 from mocapkit.geometry import quat_from_two_vectors
-from mocapkit.imu.filters.polaris_kernels import heading_kernel, polaris_kernel, strapdown_kernel
+from mocapkit.imu.filters.polaris_kernels import polaris_kernel
+from mocapkit.imu.filters.polaris_offline_kernels import heading_kernel, strapdown_kernel
 from mocapkit.imu.filters.polaris_params import PolarisCore, pack_state, unpack_state
 from mocapkit.imu.filters.polaris_reference import (
     heading_pass_reference,
