@@ -141,8 +141,8 @@ class SuitTeleopChain:
         self._recent: dict[int, deque[tuple[float, FloatArray]]] = {
             sid: deque(maxlen=window) for sid in SENSORS
         }
-        self._recent_gyr: dict[int, deque[FloatArray]] = {
-            sid: deque(maxlen=round(0.5 * c.rate_hz)) for sid in SENSORS
+        self._recent_gyr: dict[int, deque[tuple[float, FloatArray]]] = {
+            sid: deque(maxlen=window) for sid in SENSORS
         }
         self._gyr_bias: dict[int, FloatArray] = {}
         self._t_sensor = -np.inf
@@ -193,6 +193,7 @@ class SuitTeleopChain:
             self.link = None
         if self.rx is not None:
             self.rx.stop()
+            self.rx.transport.close()
             self.rx = None
         if self.server is not None:
             self.server.stop()
@@ -267,12 +268,13 @@ class SuitTeleopChain:
         return self._call(lambda: self._do_session("reindex"))
 
     # -- pipeline thread ----------------------------------------------------------------------
-    def _do_calibrate(self) -> str:
-        t_end = self._t_sensor
+    def _do_calibrate(self, t_end: float | None = None) -> str:
+        """Calibrate on the 0.5 s before ``t_end`` (sensor time; default: the newest)."""
+        t_end = self._t_sensor if t_end is None else t_end
         window = (t_end - 0.5, t_end)
         series = {}
         for sid, (name, _seg, _frame) in SENSORS.items():
-            rows = [(t, q) for t, q in self._recent[sid] if t >= window[0] - 0.05]
+            rows = [(t, q) for t, q in self._recent[sid] if window[0] - 0.05 <= t <= t_end]
             if len(rows) < 10:
                 raise DataError(
                     f"calibrate: sensor {sid} ({name}) has {len(rows)} samples in the last "
@@ -285,7 +287,9 @@ class SuitTeleopChain:
         # the operator holds still: the gyroscopes' mean is their bias (paper, section 3)
         for sid in SENSORS:
             prev = self._gyr_bias.get(sid, np.zeros(3))
-            self._gyr_bias[sid] = prev + np.mean(np.stack(self._recent_gyr[sid]), axis=0)
+            gyr = [g for t, g in self._recent_gyr[sid] if window[0] <= t <= t_end]
+            if gyr:
+                self._gyr_bias[sid] = prev + np.mean(np.stack(gyr), axis=0)
         body = BodyStream(self.tree, calib, dropout="hold", max_hold_s=0.2)
         body.update({SENSORS[sid][0]: q for sid, q in self._latest.items()}, t_end)
         q_seg = {sid: body.q_world_segment[i].copy() for i, sid in enumerate(self._seg_ids())}
@@ -360,7 +364,8 @@ class SuitTeleopChain:
         due = c.auto_calibrate_at_s
         if due is not None and self._calibrated_at is None and self._t_sensor >= due:
             try:
-                self._do_calibrate()
+                # the window ends at the due time, even if the pipeline got there late
+                self._do_calibrate(due)
             except MocapkitError as exc:
                 self._message = f"automatic calibration failed: {exc}"
                 self._calibrated_at = -1.0
@@ -382,7 +387,7 @@ class SuitTeleopChain:
         out = []
         for s in batch:
             if s.gyr is not None:
-                self._recent_gyr[s.sensor_id].append(s.gyr)
+                self._recent_gyr[s.sensor_id].append((s.t_sensor_s, s.gyr))
                 b = self._gyr_bias.get(s.sensor_id)
                 if b is not None:
                     s = replace(s, gyr=s.gyr - b)
