@@ -20,7 +20,8 @@ import numpy as np
 
 from mocapkit._validate import FloatArray
 from mocapkit.body.calibration import BodyCalibration
-from mocapkit.demo.operator_cycle import COMPARED_COORDS, SENSORS, OperatorCycle
+from mocapkit.body.sensor_tree import SensorTree
+from mocapkit.demo.operator_cycle import COMPARED_COORDS, SENSORS, TREE, OperatorCycle
 from mocapkit.geometry import quat_angle_between, quat_to_matrix
 from mocapkit.robot.model import ArmModel
 from mocapkit.robot.segment_retarget import (
@@ -45,6 +46,10 @@ class ChainHistory:
     angle_names: tuple[str, ...]
     angles_est: FloatArray  # (A, k) [rad] body model
     angles_true: FloatArray  # (A, k) [rad] simulated operator
+    body_names: tuple[str, ...]  # every coordinate of the body model
+    body_angles: FloatArray  # (A, K) [rad]
+    segment_names: tuple[str, ...]
+    q_world_segment: FloatArray  # (A, S, 4) the body model's segment orientations
     cmd_time: FloatArray  # (C,) host time since start [s]
     cmd_motion_time: FloatArray  # (C,) motion (sensor) time of the command's data [s]
     cmd_pos: FloatArray  # (C, 3) commanded end-effector position, chest frame [m]
@@ -74,7 +79,7 @@ class HistoryRecorder:
         self.motion = motion
         self.arm = arm
         self._q: dict[int, list[tuple[float, FloatArray]]] = {sid: [] for sid in SENSORS}
-        self._angles: list[tuple[float, FloatArray]] = []
+        self._angles: list[tuple[float, FloatArray, FloatArray]] = []
         self._angle_names: tuple[str, ...] = ()
         self._cmd: list[tuple[float, float, FloatArray, FloatArray, float]] = []
         self._rep: list[tuple[float, FloatArray]] = []
@@ -86,8 +91,14 @@ class HistoryRecorder:
     def calibrated(self, t: float, calib: BodyCalibration) -> None:
         self._t_cal = t
 
-    def angles(self, t: float, values: FloatArray) -> None:
-        self._angles.append((t, values.copy()))
+    def angles(self, t: float, values: FloatArray, q_world_segment: FloatArray) -> None:
+        """One body frame at sensor time t; a frame at the same time replaces the last one
+        (a packet of another sensor of the same hub round)."""
+        row = (t, values.copy(), q_world_segment.copy())
+        if self._angles and t <= self._angles[-1][0]:
+            self._angles[-1] = row
+        else:
+            self._angles.append(row)
 
     def command(self, t_host: float, t_motion: float, frame: FrameLog) -> None:
         assert frame.out.command is not None
@@ -133,12 +144,15 @@ class HistoryRecorder:
             f_time[names[sid]] = t
             f_err[names[sid]] = np.degrees(quat_angle_between(q, truth))
         a_t = np.array([r[0] for r in self._angles])
-        from mocapkit.body.sensor_tree import SensorTree
-        from mocapkit.demo.operator_cycle import TREE
-
-        coords = SensorTree.preset(TREE).coordinate_names
+        tree = SensorTree.preset(TREE)
+        coords = tree.coordinate_names
         cols = [coords.index(c) for c in COMPARED_COORDS]
-        est = np.stack([r[1][cols] for r in self._angles]) if self._angles else np.zeros((0, 5))
+        n_seg = len(tree.segment_names)
+        all_angles = (
+            np.stack([r[1] for r in self._angles]) if self._angles else np.zeros((0, len(coords)))
+        )
+        q_seg = np.stack([r[2] for r in self._angles]) if self._angles else np.zeros((0, n_seg, 4))
+        est = all_angles[:, cols]
         truth_cols = [motion.coords.index(c) for c in COMPARED_COORDS]
         true = motion.q_human[self._index(a_t)][:, truth_cols] if len(a_t) else est.copy()
         c_host = np.array([r[0] for r in self._cmd])
@@ -161,6 +175,10 @@ class HistoryRecorder:
             angle_names=COMPARED_COORDS,
             angles_est=est,
             angles_true=true,
+            body_names=coords,
+            body_angles=all_angles,
+            segment_names=tree.segment_names,
+            q_world_segment=q_seg,
             cmd_time=c_host,
             cmd_motion_time=c_mot,
             cmd_pos=cmd,

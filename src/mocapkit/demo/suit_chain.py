@@ -418,7 +418,7 @@ class SuitTeleopChain:
                 quats = {SENSORS[sid][0]: q for sid, q in self._latest.items()}
                 angles = self.body.update(quats, self._t_sensor)
                 if self.history is not None:
-                    self.history.angles(self._t_sensor, angles)
+                    self.history.angles(self._t_sensor, angles, self.body.q_world_segment)
                 samples = [
                     OrientationSample(sid, arrival or 0, self.body.q_world_segment[i])
                     for i, sid in enumerate(self._seg_ids())
