@@ -96,3 +96,48 @@ def test_missing_viser_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "viser", None)
     with pytest.raises(MissingDependencyError, match=r"pip install 'mocapkit\[viz\]'"):
         import_viser()
+
+
+def test_a_status_mapping_becomes_a_snapshot() -> None:
+    # the layout the teleoperation package's live session publishes (JSON-ready values)
+    arm = robonaut2_arm("right")
+    d = {
+        "t": 12.5,
+        "state": "held",
+        "calibration": "done",
+        "fault": "sensor 2: stale for 0.31 s (dropout?)",
+        "transitions": [{"t": 12.0, "from": "engaged", "to": "held", "reason": "sensor 2 stale"}],
+        "latency_ms": {"p50": 0.8, "p99": None, "n": 10},
+        "safety": {"robot_gate": "HOLDING", "robot_reason": "HOLD_REQUESTED",
+                   "session_fault": "sensor 2: stale"},
+        "robot_joints_deg": dict(zip(arm.joint_names, np.degrees(arm.q_ref), strict=True)),
+        "ee_commanded": None,
+        "ee_actual": {"pos": [0.6, -0.3, -0.1], "quat": [1.0, 0.0, 0.0, 0.0]},
+        "packet_loss": 0.25,
+        "sensors": {"forearm_r": {"delivered": 30}, "upper_arm_r": {"delivered": 40}},
+    }  # fmt: skip
+    s = LiveSnapshot.from_mapping(d)
+    assert s.state == "held"
+    assert s.calibrated
+    assert s.safety == "sensor 2: stale; robot gate holding (hold_requested)"
+    assert s.latency_ms_p50 == pytest.approx(0.8)
+    assert np.isnan(s.latency_ms_p99)
+    assert s.packets == 70
+    assert s.robot_q is not None
+    np.testing.assert_allclose(s.robot_q, arm.q_ref, atol=1e-12)
+    assert s.ee_command is None
+    assert s.ee_actual is not None
+    np.testing.assert_allclose(s.ee_actual[:3, 3], [0.6, -0.3, -0.1])
+    assert s.transitions == ("engaged -> held: sensor 2 stale",)
+    assert s.message.startswith("sensor 2: stale for 0.31 s")
+
+    class MappingSession(RecordedSession):
+        def snapshot(self) -> dict:  # type: ignore[override]
+            return d
+
+        def engage(self) -> None:  # type: ignore[override]
+            self.calls.append("engage")
+
+    with TeleopViewer(MappingSession(_snapshot()), port=free_port()) as v:
+        assert v.update().state == "held"
+        assert v.command("engage") == "engage: done"

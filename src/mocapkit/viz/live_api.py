@@ -3,10 +3,10 @@
 Any object with these methods can be shown by :class:`mocapkit.viz.viewer.TeleopViewer`:
 
 ``calibrate()``, ``engage()``, ``disengage()``, ``reindex()``
-    operator commands; each returns a short human-readable message and raises a
-    :class:`~mocapkit.errors.MocapkitError` when it cannot be done (the viewer shows the
-    message);
-``snapshot() -> LiveSnapshot``
+    operator commands; each may return a short human-readable message (anything else is
+    shown as "done") and raises a :class:`~mocapkit.errors.MocapkitError` when it cannot
+    be done (the viewer shows the message);
+``snapshot() -> LiveSnapshot`` (or a mapping, see :meth:`LiveSnapshot.from_mapping`)
     a consistent copy of the session's latest state, cheap enough to call at 30 Hz.
 
 Frames: positions in metres in the viewer's world (z up); the human skeleton and the
@@ -16,8 +16,9 @@ the chest frame with ``robot_origin``). Quaternions ``[w, x, y, z]``.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -99,6 +100,62 @@ class LiveSnapshot:
             robot_name=robot_name,
         )
 
+    @staticmethod
+    def from_mapping(d: Mapping[str, Any], robot_name: str = "robonaut2-right") -> LiveSnapshot:
+        """A snapshot from a JSON-ready status mapping (the teleoperation package's live
+        session publishes one): ``state``, ``fault``, ``safety`` (str or mapping),
+        ``latency_ms`` ``{p50, p99}``, ``packet_loss``, ``sensors`` ``{name: {delivered}}``,
+        ``robot_joints_deg`` ``{joint: deg}`` (in the arm's order), ``ee_commanded`` /
+        ``ee_actual`` ``{pos, quat}``, ``transitions`` (str or ``{from, to, reason}``),
+        optional ``segments`` ``[{name, start, end, quat}]`` and ``message``."""
+        from mocapkit.robot.model import pose_matrix
+
+        safety = d.get("safety", "")
+        if isinstance(safety, Mapping):
+            parts = [str(safety["session_fault"])] if safety.get("session_fault") else []
+            if safety.get("robot_gate"):
+                reason = str(safety.get("robot_reason", "")).lower()
+                parts.append(f"robot gate {str(safety['robot_gate']).lower()} ({reason})")
+            safety = "; ".join(parts) or "ok"
+        lat = d.get("latency_ms") or {}
+        nan = float("nan")
+
+        def num(v: Any) -> float:
+            return nan if v is None else float(v)
+
+        def pose(p: Any) -> FloatArray | None:
+            return None if not p else pose_matrix(p["pos"], p["quat"])
+
+        joints = d.get("robot_joints_deg")
+        transitions = tuple(
+            t if isinstance(t, str) else f"{t['from']} -> {t['to']}: {t['reason']}"
+            for t in d.get("transitions", ())
+        )
+        segments = tuple(
+            SegmentPose(s["name"], np.asarray(s["start"], float), np.asarray(s["end"], float),
+                        np.asarray(s["quat"], float))
+            for s in d.get("segments", ())
+        )  # fmt: skip
+        sensors = d.get("sensors") or {}
+        calib = d.get("calibration")
+        return LiveSnapshot(
+            t_s=float(d.get("t", 0.0)),
+            state=str(d.get("state", "unknown")),
+            safety=str(safety),
+            calibrated=bool(d.get("calibrated", calib == "done")),
+            latency_ms_p50=num(lat.get("p50") if isinstance(lat, Mapping) else None),
+            latency_ms_p99=num(lat.get("p99") if isinstance(lat, Mapping) else None),
+            packet_loss=float(d.get("packet_loss", 0.0) or 0.0),
+            packets=int(sum(int(v.get("delivered", 0)) for v in sensors.values())),
+            segments=segments,
+            robot_name=str(d.get("robot_name", robot_name)),
+            robot_q=None if joints is None else np.radians(np.array(list(joints.values()))),
+            ee_command=pose(d.get("ee_commanded")),
+            ee_actual=pose(d.get("ee_actual")),
+            message=str(d.get("message") or d.get("fault") or ""),
+            transitions=transitions,
+        )
+
     def gauges(self) -> dict[str, float | str]:
         """The figures the viewer shows as gauges (units in the keys)."""
         return {
@@ -115,15 +172,15 @@ class LiveSnapshot:
 class LiveSession(Protocol):
     """A live teleoperation session the viewer can drive (see the module docstring)."""
 
-    def calibrate(self) -> str: ...
+    def calibrate(self) -> object: ...
 
-    def engage(self) -> str: ...
+    def engage(self) -> object: ...
 
-    def disengage(self) -> str: ...
+    def disengage(self) -> object: ...
 
-    def reindex(self) -> str: ...
+    def reindex(self) -> object: ...
 
-    def snapshot(self) -> LiveSnapshot: ...
+    def snapshot(self) -> LiveSnapshot | Mapping[str, Any]: ...
 
 
 def percentile_or_nan(values: FloatArray, q: float) -> float:

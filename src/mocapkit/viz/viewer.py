@@ -145,7 +145,8 @@ class TeleopViewer:
     def command(self, method: str) -> str:
         """Call a session method (what the buttons do) and show its message."""
         try:
-            msg = str(getattr(self.session, method)())
+            result = getattr(self.session, method)()
+            msg = result if isinstance(result, str) else f"{method}: done"
         except MocapkitError as exc:
             msg = f"{method} failed: {exc}"
         except TimeoutError:
@@ -173,7 +174,8 @@ class TeleopViewer:
 
     def update(self) -> LiveSnapshot:
         """Pull one snapshot from the session and show it."""
-        snap = self.session.snapshot()
+        raw = self.session.snapshot()
+        snap = raw if isinstance(raw, LiveSnapshot) else LiveSnapshot.from_mapping(raw)
         with self.server.atomic():
             self._show_gauges(snap)
             self._show_human(snap)
