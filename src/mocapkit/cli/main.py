@@ -24,6 +24,7 @@ _COMMAND_MODULES: tuple[str, ...] = (
     "mocapkit.cli.imu_cmd",
     "mocapkit.cli.suit_cmd",
     "mocapkit.cli.teleop_cmd",
+    "mocapkit.cli.viewer_cmd",
 )
 
 _EPILOG = """\

@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from mocapkit.cli.common import EXIT_OK, print_json
+from mocapkit.cli.common import EXIT_OK, print_json, progress
 
 _EXAMPLES = """\
 examples:
@@ -86,7 +86,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     shapes = list(SHAPES) if args.shape == "all" else [args.shape]
     cfg = ServerConfig(latency_s=args.latency_ms / 1e3)
     results = []
-    for shape in shapes:
+    for shape in progress(shapes, "teleop evaluate", total=len(shapes)):
         r = evaluate_shape(shape, seed=args.seed, shape_s=args.shape_seconds, server=cfg)
         results.append(r)
         if not args.json:

@@ -1,0 +1,1 @@
+"""Plots, the HTML report and the live web viewer (viser, the ``viz`` extra)."""
