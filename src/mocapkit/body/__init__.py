@@ -1,0 +1,1 @@
+"""Human body models: skeletons, anthropometry, sensor and marker placement, scaling."""
