@@ -18,7 +18,7 @@ from mocapkit.cli.common import (
 from mocapkit.errors import MissingDependencyError, MocapkitError
 
 # Each module adds one command group with ``register(subparsers)``.
-_COMMAND_MODULES: tuple[str, ...] = ()
+_COMMAND_MODULES: tuple[str, ...] = ("mocapkit.cli.markers_cmd",)
 
 _EPILOG = """\
 exit codes: 0 success, 1 failed on the input (the message says why and how to fix it),

@@ -48,7 +48,7 @@ class OSCParams:
         backend: ``"fast"`` (numba) or ``"reference"`` (Pinocchio + numpy).
     """
 
-    substeps: int = 4
+    substeps: int = 2
     kappa: float = 0.5
     posture_kp: float = 25.0
     posture_kd: float = 10.0

@@ -109,7 +109,8 @@ def prioritized_torque(
     """
     nv = Amat.shape[0]
     R = J.shape[0]
-    y = -_tri_solve_lower(LA, h.reshape(nv, 1))[:, 0]
+    LAi = np.linalg.inv(LA)  # one BLAS-friendly inverse instead of many substitutions
+    y = -(LAi @ h)
     P = np.eye(nv)
     identity = True
     G = np.zeros((nv, R if want_inverse else 0))
@@ -124,7 +125,7 @@ def prioritized_torque(
         r = b - a
         if r == 0:
             continue
-        Bk = _tri_solve_lower(LA, J[a:b].T.copy()).T.copy()  # (r, nv) = J_k L_A^-T
+        Bk = J[a:b] @ LAi.T  # (r, nv) = J_k L_A^-T
         scale = 0.0
         for i in range(r):
             for c in range(nv):
@@ -180,7 +181,7 @@ def prioritized_torque(
     if not posture_done:
         y = y + P @ (yp - y)
     Gamma = LA @ y + h
-    qdd = _tri_solve_upper_t(LA, y)
+    qdd = LAi.T @ y
     return Gamma, qdd, G
 
 

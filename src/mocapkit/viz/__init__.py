@@ -1,0 +1,1 @@
+"""Plots, reports and viewers (matplotlib figures; the live viewer lives elsewhere)."""
