@@ -147,7 +147,7 @@ def scale_from_static(
     height_m: float,
     mass_kg: float,
     sex: Sex = "male",
-    iterations: int = 2,
+    iterations: int = 3,
 ) -> Subject:
     """Scale and register from a static trial.
 
@@ -206,7 +206,7 @@ def scale_from_static(
         human = human.with_markers(markerset.placements(height_m, human.segment_scales))
         q = _static_ik(human, names, X, weights, markerset, human.neutral() if _ == 0 else q)
         scales = _measurement_scales(human, markerset, names, X, q, scales)
-        scales = _landmark_scales(human, markerset, landmarks, q, scales)
+        scales = _landmark_scales(human, markerset, landmarks, q, scales, names, X)
     human = build_human_model(height_m, mass_kg, sex, scales)
     human = human.with_markers(markerset.placements(height_m, human.segment_scales))
     q = _static_ik(human, names, X, weights, markerset, q)
@@ -270,27 +270,199 @@ def _measurement_scales(
     return out
 
 
+def _kabsch(A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """R, t with B ≈ R A + t (rows are points)."""
+    ca, cb = A.mean(axis=0), B.mean(axis=0)
+    U, _, Vt = np.linalg.svd((A - ca).T @ (B - cb))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    R = Vt.T @ D @ U.T
+    return R, cb - R @ ca
+
+
 def _landmark_scales(
     human: HumanModel,
     ms: MarkerSet,
     landmarks: Mapping[str, FloatArray],
     q: FloatArray,
     previous: Mapping[str, float],
+    names: Sequence[str] = (),
+    X: FloatArray | None = None,
 ) -> dict[str, float]:
-    """Segments whose proximal and distal joint centres are known get that length."""
+    """Segments whose proximal and distal joint centres are known get that length.
+
+    A distal centre is a landmark (e.g. mid-condyles). A proximal centre is a landmark too,
+    or the joint's position in the parent segment placed by a rigid fit of the parent's own
+    markers (so the thigh length does not depend on the leg's static IK), or else the static
+    IK pose.
+    """
     out = dict(previous)
     frames = _segment_frames(human, q)
+    index = {n: i for i, n in enumerate(names)}
+    poses: dict[str, tuple[FloatArray, FloatArray]] = {}
+    if X is not None:
+        for seg in human.segments:
+            own = [n for n, (sg, _) in human.markers.items() if sg == seg and n in index]
+            own = [n for n in own if np.isfinite(X[index[n]]).all()]
+            if len(own) >= 3:
+                A = np.array([human.markers[n][1] for n in own])
+                B = np.array([X[index[n]] for n in own])
+                poses[seg] = _kabsch(A, B)
     seg_of_landmark = {c.name: c.segment for c in ms.joint_centres if c.name in landmarks}
-    centre_of_segment: dict[str, FloatArray] = {seg: frames[seg][1] for seg in human.segments}
+    centre: dict[str, FloatArray] = {seg: frames[seg][1] for seg in human.segments}
+    for j in human.joints:
+        if j.parent in poses:
+            R, t = poses[j.parent]
+            offset = np.asarray(j.position) * human.segment_scales.get(j.parent, 1.0)
+            centre[j.child] = R @ offset + t
     for name, seg in seg_of_landmark.items():
-        centre_of_segment[seg] = np.asarray(landmarks[name])
-    for name, child in seg_of_landmark.items():
+        centre[seg] = np.asarray(landmarks[name])
+    for child in seg_of_landmark.values():
         parent = next((j.parent for j in human.joints if j.child == child), None)
         if parent is None:
             continue
         base = np.linalg.norm(_base_child_offset(human, parent, child))
         if base < 1e-6:
             continue
-        length = float(np.linalg.norm(centre_of_segment[child] - centre_of_segment[parent]))
+        length = float(np.linalg.norm(centre[child] - centre[parent]))
         out[parent] = float(np.clip(length / base, 0.5, 2.0))
     return out
+
+
+# -- limb lengths from a dynamic trial (the paper's future work) -------------------------------
+MOTION_FRAMES = 30
+OFFSET_PRIOR_WEIGHT = 0.05  # relative weight pulling offsets towards the marker set's guess
+SCALE_PRIOR_WEIGHT = 0.03  # relative weight pulling segment scales towards the tables
+
+
+def _path_joints(human: HumanModel, segment: str) -> list[Any]:
+    """The joints from the pelvis down to ``segment`` (root first)."""
+    by_child = {j.child: j for j in human.joints}
+    path = []
+    seg = segment
+    while seg in by_child:
+        path.append(by_child[seg])
+        seg = by_child[seg].parent
+    return path[::-1]
+
+
+def estimate_scales_from_motion(
+    names: Sequence[str],
+    X: FloatArray,
+    markerset: MarkerSet,
+    height_m: float,
+    mass_kg: float,
+    sex: Sex = "male",
+    iterations: int = 6,
+    n_frames: int = MOTION_FRAMES,
+) -> Subject:
+    """Segment lengths and marker offsets that best track a *dynamic* trial.
+
+    With the segment orientations of an IK solution held fixed, a marker's world position is
+    linear in the unknowns::
+
+        x_m(f) = t(f) + Σ_{joints j above m} R_parent(j)(f) s_parent(j) p_j + R_seg(m)(f) o_m
+
+    (t: pelvis position per frame, s: segment scale factors, p_j: a joint's position in its
+    parent at table lengths, o_m: the marker's offset). Alternating IK over a frame subset
+    and one linear least-squares solve (weak priors: scales 1, offsets the set's guesses)
+    lowers the total marker residual at every round.
+
+    Args:
+        names: trial marker names (set names); X: (N, M, 3) positions [m], z-up.
+    """
+    from mocapkit.markers.ik import IKParams, initial_root_pose, solve_ik
+    from mocapkit.markers.kinematics import MarkerKinematics
+
+    names = [n for n in names if n in set(markerset.names)]
+    idx_all = list(range(len(names)))
+    X = np.asarray(X, dtype=float)
+    visible = np.isfinite(X[..., 0])
+    good = np.flatnonzero(visible.sum(axis=1) >= max(4, int(0.8 * visible.sum(axis=1).max())))
+    if len(good) < 3:
+        raise DataError(
+            "estimating limb lengths from the trial needs frames where most markers are visible; "
+            "give a static trial (--static)"
+        )
+    frames = good[np.linspace(0, len(good) - 1, min(n_frames, len(good))).round().astype(int)]
+    Xf = X[frames]
+    weights = np.array([markerset.spec(n).weight for n in names])
+    scales: dict[str, float] = {}
+    human = build_human_model(height_m, mass_kg, sex)
+    offsets = {n: np.asarray(markerset.placements(height_m, {})[n][1]) for n in names}
+    generic = dict(offsets)
+    report: dict[str, Any] = {"motion_frames": frames.tolist(), "residual_mm": []}
+    q_prev = human.neutral()
+    for _ in range(iterations):
+        human = build_human_model(height_m, mass_kg, sex, scales)
+        human = human.with_markers({n: (markerset.spec(n).segment, offsets[n]) for n in names})
+        q0 = initial_root_pose(human, names, Xf[0], q_prev)
+        sol = solve_ik(
+            human, names, Xf, weights, q0, markerset.coordinate_tasks,
+            q_posture=human.neutral(), params=IKParams(max_iter_first=300, max_iter=60),
+        )  # fmt: skip
+        q_prev = sol.q[0]
+        P = np.array([MarkerKinematics(human, names).positions(q) for q in sol.q])
+        err = np.linalg.norm(P - Xf, axis=2)
+        report["residual_mm"].append(round(float(np.nanmean(err)) * 1000, 2))
+        scales, offsets = _linear_update(human, names, sol.q, Xf, weights, generic, scales)
+    human = build_human_model(height_m, mass_kg, sex, scales)
+    human = human.with_markers({n: (markerset.spec(n).segment, offsets[n]) for n in names})
+    del idx_all
+    report["segment_scales"] = {k: round(v, 4) for k, v in scales.items()}
+    report["unregistered_markers"] = []
+    return Subject(human, markerset, q_prev, report)
+
+
+def _linear_update(
+    human: HumanModel,
+    names: list[str],
+    Q: FloatArray,
+    X: FloatArray,
+    weights: FloatArray,
+    generic: Mapping[str, FloatArray],
+    scales: Mapping[str, float],
+) -> tuple[dict[str, float], dict[str, FloatArray]]:
+    """One linear least-squares solve for (t per frame, segment scales, marker offsets)."""
+    segs = [s for s in human.segments if any(j.parent == s for j in human.joints)]
+    seg_col = {s: i for i, s in enumerate(segs)}
+    F, M = X.shape[0], len(names)
+    n_t, n_s = 3 * F, len(segs)
+    n = n_t + n_s + 3 * M
+    rows: list[FloatArray] = []
+    rhs: list[float] = []
+    frames = [_segment_frames(human, q) for q in Q]
+    paths = {n_: _path_joints(human, human.markers[n_][0]) for n_ in names}
+    for f in range(F):
+        for m, name in enumerate(names):
+            if not np.isfinite(X[f, m, 0]) or weights[m] <= 0:
+                continue
+            w = np.sqrt(weights[m])
+            seg = human.markers[name][0]
+            block = np.zeros((3, n))
+            block[:, 3 * f : 3 * f + 3] = np.eye(3)
+            for j in paths[name]:
+                Rp = frames[f][j.parent][0]
+                block[:, n_t + seg_col[j.parent]] += Rp @ np.asarray(j.position)
+            block[:, n_t + n_s + 3 * m : n_t + n_s + 3 * m + 3] = frames[f][seg][0]
+            rows.append(w * block)
+            rhs += list(w * X[f, m])
+    A = np.vstack(rows)
+    b = np.asarray(rhs)
+    # weak priors, scaled to the data's size
+    lam = np.sqrt(len(b) / max(1, n_s + 3 * M))
+    prior_rows = np.zeros((n_s + 3 * M, n))
+    prior_rhs = np.zeros(n_s + 3 * M)
+    for i, s in enumerate(segs):
+        prior_rows[i, n_t + i] = lam * SCALE_PRIOR_WEIGHT
+        prior_rhs[i] = lam * SCALE_PRIOR_WEIGHT * 1.0
+    for m, name in enumerate(names):
+        for c in range(3):
+            r = n_s + 3 * m + c
+            prior_rows[r, n_t + n_s + 3 * m + c] = lam * OFFSET_PRIOR_WEIGHT
+            prior_rhs[r] = lam * OFFSET_PRIOR_WEIGHT * generic[name][c]
+    sol, *_ = np.linalg.lstsq(np.vstack([A, prior_rows]), np.concatenate([b, prior_rhs]), rcond=None)
+    new_scales = dict(scales)
+    for i, s in enumerate(segs):
+        new_scales[s] = float(np.clip(sol[n_t + i], 0.5, 2.0))
+    offsets = {name: sol[n_t + n_s + 3 * m : n_t + n_s + 3 * m + 3] for m, name in enumerate(names)}
+    return new_scales, offsets

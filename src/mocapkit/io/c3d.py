@@ -65,7 +65,7 @@ def read_c3d(path: str | Path, units: str | None = None) -> MarkerTrajectories:
     ezc3d = _ezc3d()
     try:
         c3d = ezc3d.c3d(str(p))
-    except (RuntimeError, ValueError, IndexError) as exc:
+    except (RuntimeError, ValueError, IndexError, OSError) as exc:
         raise FileFormatError(f"{p}: not a readable C3D file ({exc})") from exc
     point = c3d["parameters"]["POINT"]
     used = int(point["USED"]["value"][0])

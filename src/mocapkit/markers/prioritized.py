@@ -30,7 +30,7 @@ RANK_TOLERANCE = 1e-10  # eigenvalues of CᵀC below this fraction of ‖B_k‖�
 # Damped least squares within a level: s / (s² + λ²) with λ² = damping ‖B_k‖² / rows, so
 # nearly singular directions (three markers almost in line on a segment, a level with as many
 # rows as free DOFs) get a bounded answer. Projectors stay exact (hard rank cut above).
-DEFAULT_DAMPING = 0.1
+DEFAULT_DAMPING = 0.01
 
 
 @njit(cache=True)
@@ -118,14 +118,15 @@ def prioritized_torque(
     for k in range(level_ptr.shape[0] - 1):
         if level_ptr[k + 1] > level_ptr[k]:
             last = k
-    yp = LA.T @ posture_acc
+    yp = np.ascontiguousarray(LA.T) @ posture_acc
+    LAiT = np.ascontiguousarray(LAi.T)
     posture_done = False
     for k in range(level_ptr.shape[0] - 1):
         a, b = level_ptr[k], level_ptr[k + 1]
         r = b - a
         if r == 0:
             continue
-        Bk = J[a:b] @ LAi.T  # (r, nv) = J_k L_A^-T
+        Bk = np.ascontiguousarray(J[a:b]) @ LAiT  # (r, nv) = J_k L_A^-T
         scale = 0.0
         for i in range(r):
             for c in range(nv):
@@ -134,54 +135,62 @@ def prioritized_torque(
             continue
         lam2 = damping * scale / r + 1e-10 * scale
         C = Bk.copy() if identity else Bk @ P
+        Ct = np.ascontiguousarray(C.T)
         res = acc[a:b] - bias[a:b] - Bk @ y
         if k == last:
-            CtC = C.T @ C
+            CtC = Ct @ C
             H = CtC.copy()
             for i in range(nv):
                 H[i, i] += lam2
             L = np.linalg.cholesky(H)
-            y = y + _chol_solve(L, C.T @ res)
+            # H⁻¹ keeps range(P) in exact arithmetic; projecting again removes the rounding
+            # that H's tiny eigenvalues (λ², on the used-up directions) would amplify
+            dy = _chol_solve(L, Ct @ res)
+            y = y + (dy if identity else P @ dy)
             if want_inverse:
-                G[:, a:b] = np.linalg.solve(H, C.T.copy())
+                Gk = np.linalg.solve(H, Ct)
+                G[:, a:b] = Gk if identity else P @ Gk
             # posture through the damped projector P - H^-1 CᵀC (symmetric: H commutes with CᵀC)
             e = yp - y
-            y = y + (e if identity else P @ e) - _chol_solve(L, CtC @ e)
+            corr = e - _chol_solve(L, CtC @ e)
+            y = y + (corr if identity else P @ corr)
             posture_done = True
             continue
         if r <= nv:
-            w, U = np.linalg.eigh(C @ C.T)
+            w, U = np.linalg.eigh(C @ Ct)
             rank = 0
             for i in range(r):
                 if w[i] > RANK_TOLERANCE * scale:
                     rank += 1
-            Ur = U[:, r - rank :]
+            Ur = np.ascontiguousarray(U[:, r - rank :])
+            UrT = np.ascontiguousarray(Ur.T)
             wr = w[r - rank :]
-            Vr = C.T @ Ur  # (nv, rank), columns with norm sqrt(w)
+            Vr = Ct @ Ur  # (nv, rank), columns with norm sqrt(w)
             for i in range(rank):
                 Vr[:, i] /= np.sqrt(wr[i])
             coef = np.sqrt(wr) / (wr + lam2)  # damped s / (s² + λ²)
-            y = y + Vr @ (coef * (Ur.T @ res))
+            y = y + Vr @ (coef * (UrT @ res))
             if want_inverse:
-                G[:, a:b] = Vr @ (Ur.T * coef.reshape(rank, 1))
+                G[:, a:b] = Vr @ (UrT * coef.reshape(rank, 1))
         else:
-            w, V = np.linalg.eigh(C.T @ C)
+            w, V = np.linalg.eigh(Ct @ C)
             rank = 0
             for i in range(nv):
                 if w[i] > RANK_TOLERANCE * scale:
                     rank += 1
-            Vr = V[:, nv - rank :].copy()
+            Vr = np.ascontiguousarray(V[:, nv - rank :])
+            VrT = np.ascontiguousarray(Vr.T)
             wr = w[nv - rank :]
             inv = 1.0 / (wr + lam2)
-            y = y + Vr @ (inv * (Vr.T @ (C.T @ res)))
+            y = y + Vr @ (inv * (VrT @ (Ct @ res)))
             if want_inverse:
-                G[:, a:b] = Vr @ ((Vr.T @ C.T) * inv.reshape(rank, 1))
-        P = P - Vr @ Vr.T
+                G[:, a:b] = Vr @ ((VrT @ Ct) * inv.reshape(rank, 1))
+        P = P - Vr @ np.ascontiguousarray(Vr.T)
         identity = False
     if not posture_done:
         y = y + P @ (yp - y)
     Gamma = LA @ y + h
-    qdd = LAi.T @ y
+    qdd = LAiT @ y
     return Gamma, qdd, G
 
 
