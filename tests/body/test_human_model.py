@@ -14,9 +14,16 @@ from mocapkit.errors import ConfigError
 def test_structure() -> None:
     h = build_human_model(1.75, 70.0)
     assert len(anatomical_joint_names(h)) == 25
-    assert h.nv == 48 and h.nq == 49
+    assert h.nv == 48
+    assert h.nq == 49
     assert pin.computeTotalMass(h.model) == pytest.approx(70.0)
-    for name in ("hip_flexion_r", "knee_angle_l", "ankle_angle_r", "lumbar_extension", "pronation_l"):
+    for name in (
+        "hip_flexion_r",
+        "knee_angle_l",
+        "ankle_angle_r",
+        "lumbar_extension",
+        "pronation_l",
+    ):
         assert name in h.dof_names
     lo, hi = h.dof_limits()
     assert (lo < 0).all() or (lo <= 0).all()
@@ -33,7 +40,9 @@ def test_mass_matrix_matches_kinetic_energy() -> None:
     A = pin.crba(model, data, q).copy()
     eye = np.eye(h.nv)
     ke = lambda v: pin.computeKineticEnergy(model, data, q, v)  # noqa: E731
-    K = np.array([[ke(eye[i] + eye[j]) - ke(eye[i]) - ke(eye[j]) for j in range(h.nv)] for i in range(h.nv)])
+    K = np.array(
+        [[ke(eye[i] + eye[j]) - ke(eye[i]) - ke(eye[j]) for j in range(h.nv)] for i in range(h.nv)]
+    )
     np.testing.assert_allclose(A, K, atol=1e-10)  # rounding of sums of ~1e2 terms
     assert np.linalg.eigvalsh(A).min() > 0
 

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from mocapkit.body.human_model import build_human_model
 from mocapkit.body.markersets import (
     available_markersets,
     guess_markerset,
@@ -13,7 +14,6 @@ from mocapkit.body.markersets import (
     markerset_from_dict,
     save_markerset,
 )
-from mocapkit.body.human_model import build_human_model
 from mocapkit.errors import ConfigError, FileFormatError
 
 
@@ -41,7 +41,7 @@ def test_matching_is_case_insensitive_and_reports() -> None:
     assert match.index == {"R.ASIS": 0, "L.ASIS": 1}
     assert match.extra == ("Extra",)
     assert "V.Sacral" in match.missing
-    best, m = guess_markerset(["LFHD", "RFHD", "C7", "LKNE", "RKNE", "LANK"])
+    best, _m = guess_markerset(["LFHD", "RFHD", "C7", "LKNE", "RKNE", "LANK"])
     assert best.name == "cmu41"
 
 
@@ -50,9 +50,15 @@ def test_bad_yaml(tmp_path: Path) -> None:
         markerset_from_dict({"markers": {"A": {"offset": [0, 0, 0]}}})
     with pytest.raises(FileFormatError, match="not a plausible marker offset in metres"):
         markerset_from_dict({"markers": {"A": {"segment": "pelvis", "offset": [100, 0, 0]}}})
-    with pytest.raises(FileFormatError, match="scaling\\[0\\] needs 'segments' and 'pairs' of known markers \\(unknown: B\\)"):
+    with pytest.raises(
+        FileFormatError,
+        match="scaling\\[0\\] needs 'segments' and 'pairs' of known markers \\(unknown: B\\)",
+    ):
         markerset_from_dict(
-            {"markers": {"A": {"segment": "pelvis"}}, "scaling": [{"segments": ["pelvis"], "pairs": [["A", "B"]]}]}
+            {
+                "markers": {"A": {"segment": "pelvis"}},
+                "scaling": [{"segments": ["pelvis"], "pairs": [["A", "B"]]}],
+            }
         )
     p = tmp_path / "x.yaml"
     p.write_text("markers: [unclosed")

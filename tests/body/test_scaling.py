@@ -27,7 +27,7 @@ def _static_trial(n: int = 40) -> tuple[list[str], np.ndarray, np.ndarray, objec
 
 
 def test_static_scaling_recovers_lengths_and_registers_exactly() -> None:
-    names, t, X, truth, ms = _static_trial()
+    names, t, X, _truth, ms = _static_trial()
     subject = scale_from_static(names, t, X, ms, 1.8, 75.0)
     s = subject.human.segment_scales
     # the knee / ankle centres are measured exactly (mid-condyle and mid-malleolus markers

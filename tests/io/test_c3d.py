@@ -41,7 +41,8 @@ def test_unlabelled_points_are_dropped(tmp_path: Path, caplog: pytest.LogCapture
 
 def test_real_files(shared_data: Path) -> None:
     cmu = read_c3d(shared_data / "c3d" / "cmu_85_02.c3d")
-    assert cmu.n_markers == 41 and cmu.rate_hz == 120.0
+    assert cmu.n_markers == 41
+    assert cmu.rate_hz == 120.0
     assert "LFHD" in cmu.names
     walk = read_c3d(shared_data / "c3d" / "walking2.c3d")
     assert walk.rate_hz == 250.0

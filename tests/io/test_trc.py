@@ -53,7 +53,7 @@ def test_bad_files(tmp_path: Path) -> None:
     p.write_text("hello\nworld\n")
     with pytest.raises(FileFormatError, match="not a TRC file"):
         read_trc(p)
-    good = (tmp_path / "g.trc")
+    good = tmp_path / "g.trc"
     write_trc(good, _traj())
     text = good.read_text().splitlines()
     text[2] = text[2].replace("\t3\t", "\t4\t", 1)  # NumMarkers 4 but 3 names

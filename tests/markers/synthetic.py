@@ -9,14 +9,18 @@ from mocapkit.body.markersets import MarkerSet, load_markerset
 from mocapkit.markers.kinematics import MarkerKinematics
 
 
-def subject(height: float = 1.8, scales: dict[str, float] | None = None) -> tuple[HumanModel, MarkerSet]:
+def subject(
+    height: float = 1.8, scales: dict[str, float] | None = None
+) -> tuple[HumanModel, MarkerSet]:
     ms = load_markerset("gait2392")
     human = build_human_model(height, 75.0, "male", scales)
     human = human.with_markers(ms.placements(height, human.segment_scales))
     return human, ms
 
 
-def motion(human: HumanModel, n: int = 40, rate: float = 60.0, amplitude: float = 0.3) -> np.ndarray:
+def motion(
+    human: HumanModel, n: int = 40, rate: float = 60.0, amplitude: float = 0.3
+) -> np.ndarray:
     """(n, nq) smooth walking-like motion within the limits (pelvis moving forward)."""
     t = np.arange(n) / rate
     Q = np.tile(human.neutral(), (n, 1))

@@ -25,9 +25,7 @@ def test_rigid_fill_is_exact_for_a_rigid_cluster() -> None:
     traj = _rigid_cluster()
     gappy = traj.positions.copy()
     gappy[20:30, 3] = np.nan
-    cleaned, report = fill_gaps(
-        traj.with_positions(gappy), "both", 0.5, {"D": ["A", "B", "C"]}
-    )
+    cleaned, report = fill_gaps(traj.with_positions(gappy), "both", 0.5, {"D": ["A", "B", "C"]})
     assert [(g.marker, g.start, g.stop) for g in report.filled_rigid] == [("D", 20, 30)]
     np.testing.assert_allclose(cleaned.positions, traj.positions, atol=1e-12)  # Kabsch: exact
 
@@ -41,7 +39,8 @@ def test_spline_fill_and_long_gaps() -> None:
     pos[60:90, 0] = np.nan  # 0.3 s: longer than max_gap_s
     traj = MarkerTrajectories(t, pos, ("A",))
     cleaned, report = fill_gaps(traj, "spline", 0.1)
-    assert len(report.filled_spline) == 1 and len(report.left_open) == 1
+    assert len(report.filled_spline) == 1
+    assert len(report.left_open) == 1
     # a cubic spline through a smooth sine sampled at 100 Hz: error ~1e-5
     np.testing.assert_allclose(cleaned.positions[40:45], truth[40:45], atol=1e-4)
     assert np.isnan(cleaned.positions[60:90]).all()
@@ -52,7 +51,8 @@ def test_find_gaps_reports_never_visible() -> None:
     pos = np.zeros((5, 2, 3))
     pos[:, 1] = np.nan
     gaps, never = find_gaps(MarkerTrajectories(np.arange(5) / 10, pos, ("A", "B")))
-    assert gaps == [] and never == ["B"]
+    assert gaps == []
+    assert never == ["B"]
 
 
 def test_lowpass() -> None:

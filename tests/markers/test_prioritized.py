@@ -18,7 +18,14 @@ def _problem(seed: int, nv: int = 12) -> tuple:
     M = rng.normal(size=(nv, nv))
     A = M @ M.T + nv * np.eye(nv)
     J = rng.normal(size=(12, nv))
-    return A, np.linalg.cholesky(A), rng.normal(size=nv), J, rng.normal(size=12), rng.normal(size=12) * 0.1
+    return (
+        A,
+        np.linalg.cholesky(A),
+        rng.normal(size=nv),
+        J,
+        rng.normal(size=12),
+        rng.normal(size=12) * 0.1,
+    )
 
 
 @pytest.mark.parametrize("seed", [0, 1])
@@ -50,14 +57,18 @@ def test_lower_levels_do_not_disturb_higher_ones() -> None:
     J3 = np.vstack([J[:3], J[:3]])
     ptr3 = np.array([0, 3, 6])
     acc3 = np.concatenate([acc[:3], acc[:3] + 100.0])
-    _, qdd3, _ = prioritized_torque(A, LA, h, J3, acc3, np.zeros(6), ptr3, np.zeros(12), False, 1e-8)
+    _, qdd3, _ = prioritized_torque(
+        A, LA, h, J3, acc3, np.zeros(6), ptr3, np.zeros(12), False, 1e-8
+    )
     np.testing.assert_allclose(J[:3] @ qdd3, acc[:3], atol=1e-6)
 
 
 def test_error_bound_eq15() -> None:
     A, LA, h, J, acc, bias = _problem(4)
     dx = np.random.default_rng(9).normal(size=12)
-    _, _, Gy = prioritized_torque(A, LA, h, J, acc, bias, np.array([0, 12]), np.zeros(12), True, 1e-9)
+    _, _, Gy = prioritized_torque(
+        A, LA, h, J, acc, bias, np.array([0, 12]), np.zeros(12), True, 1e-9
+    )
     dq = joint_error_bound(LA, Gy, dx)
     ref = joint_error_bound_reference(np.linalg.inv(A), J, dx)
     # the damping floor (1e-10 of ‖B‖²) moves a well-posed answer by ~1e-7 relative

@@ -48,7 +48,9 @@ def test_kernels_match_pinocchio(setup: tuple, seed: int) -> None:
     np.testing.assert_allclose(A, pin.crba(human.model, data, q), atol=1e-9)
     np.testing.assert_allclose(h, pin.nonLinearEffects(human.model, data, q, v), atol=1e-8)
     dv = 0.3 * v
-    np.testing.assert_allclose(rf.integrate(q, dv)[:3], pin.integrate(human.model, q, dv)[:3], atol=1e-12)
+    np.testing.assert_allclose(
+        rf.integrate(q, dv)[:3], pin.integrate(human.model, q, dv)[:3], atol=1e-12
+    )
     qa, qb = rf.integrate(q, dv)[3:7], np.asarray(pin.integrate(human.model, q, dv))[3:7]
     assert min(np.abs(qa - qb).max(), np.abs(qa + qb).max()) < 1e-12  # same rotation up to sign
     fast = MarkerKinematics(human, list(kin.names)).positions_jacobians_bias(q, v)
@@ -64,6 +66,9 @@ def test_marker_jacobian_against_finite_differences(setup: tuple) -> None:
     for k in range(human.nv):
         dv = np.zeros(human.nv)
         dv[k] = eps
-        fd = (kin.positions(pin.integrate(human.model, q, dv)) - kin.positions(pin.integrate(human.model, q, -dv))) / (2 * eps)
+        fd = (
+            kin.positions(pin.integrate(human.model, q, dv))
+            - kin.positions(pin.integrate(human.model, q, -dv))
+        ) / (2 * eps)
         # central differences: truncation O(eps²) and rounding O(1e-16 / eps) ~ 1e-10
         np.testing.assert_allclose(J[:, :, k], fd, atol=1e-7)

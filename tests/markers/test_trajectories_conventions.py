@@ -55,14 +55,17 @@ def _static(up: str = "z", scale: float = 1.0) -> tuple[MarkerTrajectories, dict
 def test_up_axis_detected_from_static(up: str) -> None:
     static, segments = _static(up)
     found = conventions.detect_up_axis(static, segments)
-    assert found is not None and found.axis == up
+    assert found is not None
+    assert found.axis == up
     assert found.angle_deg < 10.0  # a standing body is vertical within a few degrees
     assert conventions.resolve_up_axis(static, segments) == up
 
 
 def test_declared_up_axis_that_contradicts_static_is_an_error() -> None:
     static, segments = _static("y")
-    with pytest.raises(DataError, match="above its foot markers along y, but the up axis was given as z"):
+    with pytest.raises(
+        DataError, match="above its foot markers along y, but the up axis was given as z"
+    ):
         conventions.resolve_up_axis(static, segments, "z")
 
 

@@ -252,7 +252,8 @@ def _inertias(height_m: float, mass_kg: float, sex: Sex) -> dict[str, SegmentIne
     ) -> SegmentInertia:
         sp = p[name]
         m = sp.mass if mass is None else mass
-        return SegmentInertia(m, (com_x, 0.0, com_z), tuple(m * np.asarray(sp.radii) ** 2))  # type: ignore[arg-type]
+        mom = m * np.asarray(sp.radii) ** 2
+        return SegmentInertia(m, (com_x, 0.0, com_z), (float(mom[0]), float(mom[1]), float(mom[2])))
 
     lt, mt, ut, hd = p["lower_trunk"], p["middle_trunk"], p["upper_trunk"], p["head"]
     out = {
@@ -283,19 +284,19 @@ def _inertias(height_m: float, mass_kg: float, sex: Sex) -> dict[str, SegmentIne
         out[f"talus_{s}"] = SegmentInertia(
             0.05 * foot.mass,
             (0.0, 0.0, 0.0),
-            tuple(0.05 * foot.mass * (0.02 * k) ** 2 for _ in range(3)),  # type: ignore[arg-type]
+            (0.05 * foot.mass * (0.02 * k) ** 2,) * 3,
         )
         mf = 0.80 * foot.mass
         out[f"foot_{s}"] = SegmentInertia(
             mf,
             (0.100 * k, 0.0, 0.030 * k),
-            tuple(mf * np.asarray(foot.radii) ** 2),  # type: ignore[arg-type]
+            (mf * foot.radii[0] ** 2, mf * foot.radii[1] ** 2, mf * foot.radii[2] ** 2),
         )
         mt_ = 0.15 * foot.mass
         out[f"toes_{s}"] = SegmentInertia(
             mt_,
             (0.035 * k, -y * 0.018 * k, 0.006 * k),
-            tuple(mt_ * (0.03 * k) ** 2 for _ in range(3)),  # type: ignore[arg-type]
+            (mt_ * (0.03 * k) ** 2,) * 3,
         )
     return out
 

@@ -68,7 +68,7 @@ def stillest_window(time: FloatArray, X: FloatArray, window_s: float = STATIC_WI
     if n < 3:
         return slice(0, n)
     rate = 1.0 / float(np.median(np.diff(time)))
-    w = max(2, min(n, int(round(window_s * rate))))
+    w = max(2, min(n, round(window_s * rate)))
     with np.errstate(invalid="ignore"):
         speed = np.linalg.norm(np.diff(X, axis=0), axis=2) * rate  # (n-1, M)
         per_frame = np.nanmean(np.where(np.isfinite(speed), speed, np.nan), axis=1)
@@ -452,7 +452,7 @@ def _linear_update(
     lam = np.sqrt(len(b) / max(1, n_s + 3 * M))
     prior_rows = np.zeros((n_s + 3 * M, n))
     prior_rhs = np.zeros(n_s + 3 * M)
-    for i, s in enumerate(segs):
+    for i in range(n_s):
         prior_rows[i, n_t + i] = lam * SCALE_PRIOR_WEIGHT
         prior_rhs[i] = lam * SCALE_PRIOR_WEIGHT * 1.0
     for m, name in enumerate(names):
@@ -460,7 +460,9 @@ def _linear_update(
             r = n_s + 3 * m + c
             prior_rows[r, n_t + n_s + 3 * m + c] = lam * OFFSET_PRIOR_WEIGHT
             prior_rhs[r] = lam * OFFSET_PRIOR_WEIGHT * generic[name][c]
-    sol, *_ = np.linalg.lstsq(np.vstack([A, prior_rows]), np.concatenate([b, prior_rhs]), rcond=None)
+    sol, *_ = np.linalg.lstsq(
+        np.vstack([A, prior_rows]), np.concatenate([b, prior_rhs]), rcond=None
+    )
     new_scales = dict(scales)
     for i, s in enumerate(segs):
         new_scales[s] = float(np.clip(sol[n_t + i], 0.5, 2.0))

@@ -16,39 +16,85 @@ log = logging.getLogger(__name__)
 
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("trial", type=Path, help="marker trial (.c3d or .trc)")
-    p.add_argument("--static", type=Path, default=None,
-                   help="static (standing) trial for scaling and marker registration; without "
-                        "it the limb lengths are estimated from the trial itself")
-    p.add_argument("--method", choices=("osc", "ik"), default="osc",
-                   help="osc: direct marker control (default); ik: least-squares IK baseline")
-    p.add_argument("--mode", choices=("offline", "online"), default="offline",
-                   help="offline: whole trial in one compiled run; online: frame by frame")
-    p.add_argument("--markerset", default=None,
-                   help="preset name (gait2392, cmu41, walking2) or YAML file; default: the "
-                        "preset matching most labels")
-    p.add_argument("--grouping", default="single",
-                   help="marker priority levels for osc: single, independent, tree, weights, "
-                        "paper, or a YAML file (default: single)")
-    p.add_argument("--height-m", type=float, default=None,
-                   help="stature [m] (default: estimated from the static trial)")
+    p.add_argument(
+        "--static",
+        type=Path,
+        default=None,
+        help="static (standing) trial for scaling and marker registration; without "
+        "it the limb lengths are estimated from the trial itself",
+    )
+    p.add_argument(
+        "--method",
+        choices=("osc", "ik"),
+        default="osc",
+        help="osc: direct marker control (default); ik: least-squares IK baseline",
+    )
+    p.add_argument(
+        "--mode",
+        choices=("offline", "online"),
+        default="offline",
+        help="offline: whole trial in one compiled run; online: frame by frame",
+    )
+    p.add_argument(
+        "--markerset",
+        default=None,
+        help="preset name (gait2392, cmu41, walking2) or YAML file; default: the "
+        "preset matching most labels",
+    )
+    p.add_argument(
+        "--grouping",
+        default="single",
+        help="marker priority levels for osc: single, independent, tree, weights, "
+        "paper, or a YAML file (default: single)",
+    )
+    p.add_argument(
+        "--height-m",
+        type=float,
+        default=None,
+        help="stature [m] (default: estimated from the static trial)",
+    )
     p.add_argument("--mass-kg", type=float, default=None, help="body mass [kg] (default 75)")
-    p.add_argument("--sex", choices=("male", "female"), default="male",
-                   help="which de Leva table (default male)")
-    p.add_argument("--units", choices=("auto", "mm", "cm", "m"), default="auto",
-                   help="marker units (default: as declared, checked against body size)")
-    p.add_argument("--up-axis", default="auto",
-                   help="file's up axis: auto (from the static trial), z, y, x, -z, -y, -x")
-    p.add_argument("--fill-gaps", choices=("none", "rigid", "spline", "both"), default="none",
-                   help="fill gaps up to --max-gap-s (default none)")
+    p.add_argument(
+        "--sex",
+        choices=("male", "female"),
+        default="male",
+        help="which de Leva table (default male)",
+    )
+    p.add_argument(
+        "--units",
+        choices=("auto", "mm", "cm", "m"),
+        default="auto",
+        help="marker units (default: as declared, checked against body size)",
+    )
+    p.add_argument(
+        "--up-axis",
+        default="auto",
+        help="file's up axis: auto (from the static trial), z, y, x, -z, -y, -x",
+    )
+    p.add_argument(
+        "--fill-gaps",
+        choices=("none", "rigid", "spline", "both"),
+        default="none",
+        help="fill gaps up to --max-gap-s (default none)",
+    )
     p.add_argument("--max-gap-s", type=float, default=0.25, help="longest gap to fill [s]")
-    p.add_argument("--lowpass-hz", type=float, default=None,
-                   help="zero-phase Butterworth low-pass cut-off [Hz] (default off)")
+    p.add_argument(
+        "--lowpass-hz",
+        type=float,
+        default=None,
+        help="zero-phase Butterworth low-pass cut-off [Hz] (default off)",
+    )
     p.add_argument("--start-s", type=float, default=None, help="first time to use [s]")
     p.add_argument("--end-s", type=float, default=None, help="last time to use [s]")
-    p.add_argument("--substeps", type=int, default=2,
-                   help="simulation steps per frame for osc (default 2)")
-    p.add_argument("--backend", choices=("fast", "reference"), default="fast",
-                   help="fast (numba) or reference (Pinocchio + numpy)")
+    p.add_argument(
+        "--substeps", type=int, default=2, help="simulation steps per frame for osc (default 2)"
+    )
+    p.add_argument(
+        "--backend",
+        choices=("fast", "reference"),
+        default="fast",
+        help="fast (numba) or reference (Pinocchio + numpy)",
+    )
 
 
 def register(subparsers: Any) -> None:
@@ -63,13 +109,25 @@ def register(subparsers: Any) -> None:
         description="Reconstruct joint angles; writes .mot (or .csv) and prints figures.",
     )  # fmt: skip
     _add_common(rec)
-    rec.add_argument("-o", "--output", type=Path, required=True,
-                     help="output joint angles: .mot (OpenSim) or .csv")
-    rec.add_argument("--tracked-trc", type=Path, default=None,
-                     help="also write the model's tracked markers as TRC")
-    rec.add_argument("--json", action="store_true",
-                     help='print {"frames", "fps", "marker_rms_mm", "marker_max_mm", '
-                          '"joint_error_bound_deg_max"}')
+    rec.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        required=True,
+        help="output joint angles: .mot (OpenSim) or .csv",
+    )
+    rec.add_argument(
+        "--tracked-trc",
+        type=Path,
+        default=None,
+        help="also write the model's tracked markers as TRC",
+    )
+    rec.add_argument(
+        "--json",
+        action="store_true",
+        help='print {"frames", "fps", "marker_rms_mm", "marker_max_mm", '
+        '"joint_error_bound_deg_max"}',
+    )
     rec.set_defaults(func=_reconstruct)
     rep = sub.add_parser(
         "report", help="the paper's Figures 2-4 for a trial",
@@ -78,8 +136,12 @@ def register(subparsers: Any) -> None:
     )  # fmt: skip
     _add_common(rep)
     rep.add_argument("-o", "--output", type=Path, required=True, help="output directory")
-    rep.add_argument("--reference", type=Path, default=None,
-                     help="a .mot to compare joint angles with (e.g. OpenSim's IK)")
+    rep.add_argument(
+        "--reference",
+        type=Path,
+        default=None,
+        help="a .mot to compare joint angles with (e.g. OpenSim's IK)",
+    )
     rep.add_argument("--json", action="store_true", help="print the report's figures")
     rep.set_defaults(func=_report)
     ins = sub.add_parser("inspect", help="markers, frames, units, gaps of a marker file")
@@ -135,7 +197,7 @@ def _reconstruct(args: argparse.Namespace) -> int:
 def _report(args: argparse.Namespace) -> int:
     from mocapkit.viz.marker_report import write_report
 
-    result, subject, cleaning = _run(args)
+    result, _subject, _cleaning = _run(args)
     summary = write_report(result, args.output, reference=args.reference)
     if args.json:
         print_json(summary)

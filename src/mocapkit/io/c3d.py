@@ -126,7 +126,7 @@ def write_c3d(path: str | Path, trajectories: MarkerTrajectories) -> Path:
     point["UNITS"]["value"] = ["mm"]
     pts = np.ones((4, traj.n_markers, traj.n_frames))
     mm = np.transpose(traj.positions, (2, 1, 0)) * 1000.0
-    visible = np.isfinite(mm).all(axis=0)
+    visible = np.asarray(np.isfinite(mm).all(axis=0))
     pts[:3] = np.where(visible[None], mm, 0.0)
     c3d["data"]["points"] = pts
     residuals = np.where(visible, 0.0, -1.0)[None]

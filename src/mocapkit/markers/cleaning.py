@@ -109,7 +109,9 @@ def _rigid_fill_gap(pos: FloatArray, m: int, donors: Sequence[int], gap: Gap) ->
         pos[gap.start : gap.stop, m] = estimates[0][1]
     else:
         w = (np.arange(gap.length) + 1.0) / (gap.length + 1.0)  # 0 -> before, 1 -> after
-        pos[gap.start : gap.stop, m] = (1 - w)[:, None] * estimates[0][1] + w[:, None] * estimates[1][1]
+        pos[gap.start : gap.stop, m] = (1 - w)[:, None] * estimates[0][1] + w[:, None] * estimates[
+            1
+        ][1]
     return True
 
 
@@ -144,7 +146,9 @@ def fill_gaps(
             continue
         m = index[gap.marker]
         if method in ("rigid", "both") and clusters:
-            donors = [index[d] for d in clusters.get(gap.marker, ()) if d in index and d != gap.marker]
+            donors = [
+                index[d] for d in clusters.get(gap.marker, ()) if d in index and d != gap.marker
+            ]
             if len(donors) >= 3 and _rigid_fill_gap(pos, m, donors, gap):
                 report.filled_rigid.append(gap)
                 continue
@@ -169,7 +173,8 @@ def lowpass(
     rate = traj.rate_hz
     if not (0 < cutoff_hz < rate / 2):
         raise ConfigError(
-            f"lowpass cutoff {cutoff_hz} Hz must be between 0 and the Nyquist frequency {rate / 2:g} Hz"
+            f"lowpass cutoff {cutoff_hz} Hz must be between 0 and the Nyquist frequency "
+            f"{rate / 2:g} Hz"
         )
     rep = report or CleaningReport()
     rep.lowpass_hz = cutoff_hz

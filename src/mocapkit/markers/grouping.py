@@ -5,18 +5,19 @@ coupled, so they should not share a level. Strategies:
 
 - ``paper``: the seed's own grouping — (right shoulder, left wrist), then (left elbow,
   right wrist) — taken from the marker set's ``groups.paper`` or its ``roles``;
-- ``auto`` (reliability): one level per distinct marker weight, heaviest first — the
+- ``weights`` (reliability): one level per distinct marker weight, heaviest first — the
   marker set's weights say how much a marker can be trusted (OpenSim's gait2392: bony
   landmarks 10, clusters 1, acromion 0.5, head 0.1), so trusted markers are tracked
   exactly and the rest share what is left, least squares within a level (weights scale
   the rows); a set whose markers all weigh the same gives one level;
 - ``tree``: level d holds the markers of the segments d joints away from the pelvis, so
   distal markers cannot tilt proximal segments (a foot marker never moves the pelvis);
-- ``independent``: level i holds the i-th heaviest marker (IK weight, then name) of every
-  segment — the paper's rule that rigidly coupled markers never share a level, applied to
-  all markers; with skin-marker noise its nearly square first level makes the whole
-  hierarchy fragile (measured in docs/benchmarks.md);
-- ``single``: one level with every marker (a least-squares compromise among all);
+- ``independent`` (alias ``auto``, the automatic grouping of all markers): level i holds
+  the i-th heaviest marker (IK weight, then name) of every segment — the paper's rule that
+  rigidly coupled markers never share a level; with skin-marker noise its nearly square
+  first level makes the hierarchy fragile (measured in docs/benchmarks.md);
+- ``single`` (the default): one level with every marker, least squares weighted by the
+  marker weights — the paper's formulation with n = 1 and the posture below;
 - a YAML file: ``levels: [[A, B], [C, D, E]]``.
 """
 
@@ -31,7 +32,7 @@ from mocapkit.body.markersets import MarkerSet
 from mocapkit.errors import ConfigError, FileFormatError
 
 Levels = tuple[tuple[str, ...], ...]
-STRATEGIES = ("auto", "tree", "independent", "paper", "single")
+STRATEGIES = ("single", "independent", "auto", "tree", "weights", "paper")
 
 
 def weight_levels(names: Sequence[str], weights: Mapping[str, float]) -> Levels:
@@ -83,11 +84,11 @@ def make_levels(
 ) -> Levels:
     """Priority levels over the tracked ``names`` for a strategy or a YAML file."""
     available = set(names)
-    if strategy == "auto":
+    if strategy == "weights":
         return weight_levels(names, weights)
     if strategy == "tree":
         return tree_levels(names, segment_of, weights, segment_depth)
-    if strategy == "independent":
+    if strategy in ("independent", "auto"):
         return independent_levels(names, segment_of, weights)
     if strategy == "single":
         return (tuple(n for n in names if weights.get(n, 1.0) > 0),)

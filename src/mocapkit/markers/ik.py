@@ -196,7 +196,8 @@ def _ik_frame_reference(
     sw = np.sqrt(w[vis])
     mu = 1e-3
     it = 0
-    for it in range(1, max_iter + 1):
+    for _ in range(max_iter):
+        it += 1
         Jw = (J[vis] * sw[:, None, None]).reshape(-1, model.nv)
         rw = ((X[vis] - P[vis]) * sw[:, None]).reshape(-1)
         H = Jw.T @ Jw + np.diag(np.concatenate([np.zeros(6), pw[7:]]))

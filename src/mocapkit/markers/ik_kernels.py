@@ -3,7 +3,8 @@
 
 Per frame, minimise ``Σ_i w_i ‖x_i − p_i(q)‖² + Σ_j w_j (q_j − q̄_j)²`` over visible markers
 (the second sum holds OpenSim's coordinate tasks, w_j large, and a weak posture prior that
-removes the flat directions of redundant joints such as neck + head nod) by projected Levenberg–Marquardt: the step solves
+removes the flat directions of redundant joints such as neck + head nod) by projected
+Levenberg–Marquardt: the step solves
 ``(H_ff + μ diag(H_ff) + λ₀ I) δ_f = g_f`` on the free DOFs (a revolute DOF at a limit whose
 gradient points out of the box is frozen), ``q ← clamp(q ⊕ δ)``; μ shrinks after a step that
 lowers the cost and grows after one that does not. λ₀ = 1e-6 keeps DOFs that no marker
@@ -15,8 +16,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from mocapkit._validate import FloatArray
 from mocapkit.markers.rigid_fast import forward_kinematics, integrate, marker_kinematics
+
+FloatArray = np.ndarray  # numba kernels: mypy does not track their dtypes
 
 LAMBDA0 = 1e-6
 
@@ -75,7 +77,8 @@ def ik_frame(
     cost = _cost(P, X, w, q, prior_value, prior_weight)
     mu = 1e-3
     it = 0
-    for it in range(1, max_iter + 1):
+    for _ in range(max_iter):
+        it += 1
         n_vis = 0
         for m in range(X.shape[0]):
             if w[m] > 0.0 and np.isfinite(X[m, 0]):

@@ -49,7 +49,7 @@ class OSCParams:
     """
 
     substeps: int = 2
-    kappa: float = 0.5
+    kappa: float = 0.3
     posture_kp: float = 25.0
     posture_kd: float = 10.0
     damping: float = DEFAULT_DAMPING
@@ -269,7 +269,8 @@ def reconstruct_offline(
     Xd, Xdd = target_derivatives(X, rate_hz)
     Q, P, DQ, E = osc_trial(
         fm.parent, fm.R0, fm.p0, fm.axis, fm.mass, fm.com, fm.inertia, fm.gravity,
-        fm.marker_joint, fm.marker_offset, q0, X, Xd, Xdd, pb.row_weight, pb.level_ptr, pb.level_markers, pb.lock_dof, pb.lock_value, pb.lower, pb.upper,
+        fm.marker_joint, fm.marker_offset, q0, X, Xd, Xdd, pb.row_weight, pb.level_ptr,
+        pb.level_markers, pb.lock_dof, pb.lock_value, pb.lower, pb.upper,
         pb.q_posture, p.gains(rate_hz), 1.0 / rate_hz, p.substeps,
     )  # fmt: skip
     if not np.isfinite(Q).all():

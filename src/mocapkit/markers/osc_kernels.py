@@ -27,7 +27,6 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from mocapkit._validate import FloatArray
 from mocapkit.markers.prioritized import joint_error_bound, prioritized_torque
 from mocapkit.markers.rigid_fast import (
     dynamics_terms,
@@ -36,6 +35,8 @@ from mocapkit.markers.rigid_fast import (
     marker_bias,
     marker_kinematics,
 )
+
+FloatArray = np.ndarray  # numba kernels: mypy does not track their dtypes
 
 
 @njit(cache=True)
@@ -182,7 +183,7 @@ def osc_frame(
         a_post = -kdp * v
         for iq in range(7, q.shape[0]):
             a_post[iq - 1] += kpp * (q_posture[iq] - q[iq])
-        Gamma, qdd, G = prioritized_torque(
+        _Gamma, qdd, G = prioritized_torque(
             Amat, LA, h, Jall, acc, bias, ptr, a_post, j == n_sub - 1, gains[6]
         )
         if j == n_sub - 1:

@@ -24,7 +24,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from mocapkit._validate import FloatArray
+FloatArray = np.ndarray  # numba kernels: mypy does not track their dtypes
+
 
 RANK_TOLERANCE = 1e-10  # eigenvalues of CᵀC below this fraction of ‖B_k‖²: rank lost
 # Damped least squares within a level: s / (s² + λ²) with λ² = damping ‖B_k‖² / rows, so

@@ -163,7 +163,7 @@ def prepare(
     trial, report = fill_gaps(trial, options.fill_gaps, options.max_gap_s, clusters)
     if options.lowpass_hz:
         trial, report = lowpass(trial, options.lowpass_hz, report=report)
-    long_gaps = [g for g in report.left_open if 0 < g.start and g.stop < trial.n_frames]
+    long_gaps = [g for g in report.left_open if g.start > 0 and g.stop < trial.n_frames]
     if long_gaps:
         worst = max(long_gaps, key=lambda g: g.length)
         warnings.add(
@@ -232,13 +232,17 @@ def calibrate(
 ) -> Subject:
     """A scaled subject from the static trial, or from the trial itself when there is none."""
     if static is not None:
-        return scale_from_static(static.names, static.time, static.positions, ms, height_m, mass_kg, sex)
+        return scale_from_static(
+            static.names, static.time, static.positions, ms, height_m, mass_kg, sex
+        )
     from mocapkit.body.scaling import estimate_scales_from_motion
 
     return estimate_scales_from_motion(trial.names, trial.positions, ms, height_m, mass_kg, sex)
 
 
-def _initial_pose(subject: Subject, names: Sequence[str], X0: FloatArray, weights: FloatArray) -> FloatArray:
+def _initial_pose(
+    subject: Subject, names: Sequence[str], X0: FloatArray, weights: FloatArray
+) -> FloatArray:
     """Best IK solution of the first frame from the neutral and the static pose."""
     human = subject.human
     best: tuple[float, FloatArray] | None = None

@@ -226,7 +226,11 @@ class ReconstructionResult:
 
     # -- files -----------------------------------------------------------------------------
     def _output_columns(self) -> tuple[list[str], FloatArray]:
-        keep = [k for k in range(len(self.coordinate_names)) if np.isfinite(self.coordinates[:, k]).any()]
+        keep = [
+            k
+            for k in range(len(self.coordinate_names))
+            if np.isfinite(self.coordinates[:, k]).any()
+        ]
         data = self.coordinates[:, keep].copy()
         ang = self.angular[keep]
         data[:, ang] = np.degrees(data[:, ang])
@@ -254,8 +258,8 @@ class ReconstructionResult:
         from mocapkit.io.trc import write_trc
         from mocapkit.markers.trajectories import MarkerTrajectories
 
+        rate = 1.0 / float(np.median(np.diff(self.time))) if self.n_frames > 1 else 0.0
         traj = MarkerTrajectories(
-            self.time, self.tracked_positions, self.marker_names,
-            meta={"rate_hz": 1.0 / float(np.median(np.diff(self.time))) if self.n_frames > 1 else 0.0},
-        )  # fmt: skip
+            self.time, self.tracked_positions, self.marker_names, meta={"rate_hz": rate}
+        )
         return write_trc(path, traj)

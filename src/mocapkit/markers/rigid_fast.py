@@ -21,8 +21,9 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from mocapkit._validate import FloatArray
 from mocapkit.errors import ConfigError
+
+FloatArray = np.ndarray  # numba kernels: mypy does not track their dtypes
 
 IntArray = np.ndarray
 
@@ -473,7 +474,7 @@ def integrate(q: FloatArray, dv: FloatArray) -> FloatArray:
         )
     else:
         ax = w / th
-        Rexp = _axis_angle(ax, th)
+        Rexp = _axis_angle(ax, float(th))
         K = np.array([[0.0, -ax[2], ax[1]], [ax[2], 0.0, -ax[0]], [-ax[1], ax[0], 0.0]])
         Vmat = np.eye(3) + (1 - np.cos(th)) / th * K + (th - np.sin(th)) / th * (K @ K)
     out[:3] = q[:3] + _mv(R, _mv(Vmat, v))

@@ -107,7 +107,9 @@ def _fig2(result: ReconstructionResult, out: Path, reference: Path | None) -> Pa
 def _fig3(result: ReconstructionResult, out: Path, roles: Sequence[str]) -> Path:
     plt = _pyplot()
     markers = [m for m in roles if m in result.marker_names] or list(result.tracked[:4])
-    fig, axes = plt.subplots(len(markers), 3, figsize=(12, 2.4 * len(markers)), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(
+        len(markers), 3, figsize=(12, 2.4 * len(markers)), sharex=True, squeeze=False
+    )
     for i, m in enumerate(markers):
         k = result.marker_names.index(m)
         for a in range(3):
