@@ -19,7 +19,7 @@ semi-implicit Euler, ``Kd = 1/dt`` and ``Kp = κ/dt²`` shrink the error by (1 �
 away (|v| > 1e4) ends the frame with NaN outputs, which the callers report.
 
 The frame's outputs are the state at t_f, the tracked markers P(q(t_f)), their errors to
-the targets at t_f and the bound Δq = Jbar_⊗ (x_f − P) (eq. 15), J_⊗ from the last step.
+the targets at t_f and the bound Δq = Jbar_⊗ Δx_⊗ (eq. 15) of the last step's marker errors.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from mocapkit.markers.prioritized import joint_error_bound, prioritized_torque
+from mocapkit.markers.prioritized import prioritized_torque
 from mocapkit.markers.rigid_fast import (
     dynamics_terms,
     forward_kinematics,
@@ -134,8 +134,7 @@ def osc_frame(
         if tracked[level_markers[k]]:
             n_marker_rows += 3
     n_levels = level_ptr.shape[0] - 1
-    G_m = np.zeros((nv, n_marker_rows))
-    LA_last = np.eye(nv)
+    dq = np.zeros(nv)
     for j in range(n_sub):
         s_now = j * dt
         R, t, S, V, Ab, Amat, h = dynamics_terms(
@@ -153,6 +152,7 @@ def osc_frame(
         Jall = np.zeros((n_rows, nv))
         acc = np.zeros(n_rows)
         bias = np.zeros(n_rows)
+        dx = np.zeros(n_rows)
         ptr = np.zeros(n_levels + 2, dtype=np.int64)
         for c in range(n_lock):
             iq = lock_rows[c]
@@ -178,17 +178,16 @@ def osc_frame(
                     Jall[r + c] = sw * J[m, c]
                     acc[r + c] = sw * (ades[c] + kd * (vdes[c] - Jv[c]) + kp * (xdes[c] - P[m, c]))
                     bias[r + c] = sw * B[m, c]
+                    dx[r + c] = sw * (xdes[c] - P[m, c])
                 r += 3
             ptr[lv + 2] = r
         a_post = -kdp * v
         for iq in range(7, q.shape[0]):
             a_post[iq - 1] += kpp * (q_posture[iq] - q[iq])
-        _Gamma, qdd, G = prioritized_torque(
-            Amat, LA, h, Jall, acc, bias, ptr, a_post, j == n_sub - 1, gains[6]
+        # the bound (eq. 15) of the last step's marker errors; lock rows have no error
+        _Gamma, qdd, dq = prioritized_torque(
+            Amat, LA, h, Jall, acc, bias, ptr, a_post, dx, j == n_sub - 1, gains[6]
         )
-        if j == n_sub - 1:
-            G_m = np.ascontiguousarray(G[:, n_lock:])  # the bound: marker rows only
-            LA_last = LA
         v = v + qdd * dt
         q = integrate(q, v * dt)
         for iq in range(7, q.shape[0]):
@@ -204,23 +203,10 @@ def osc_frame(
     R, t, S = forward_kinematics(parent, R0, p0, axis, q)
     P, J = marker_kinematics(parent, R, t, S, marker_joint, marker_offset)
     err = np.full(M, np.nan)
-    dx = np.zeros(n_marker_rows)
-    r = 0
-    for lv in range(n_levels):
-        for k in range(level_ptr[lv], level_ptr[lv + 1]):
-            m = level_markers[k]
-            if not tracked[m]:
-                continue
-            target = x1[m] if np.isfinite(x1[m, 0]) else x0[m]
-            sw = np.sqrt(row_weight[m])
-            for c in range(3):
-                dx[r + c] = sw * (target[c] - P[m, c])
-            r += 3
     for m in range(M):
         if np.isfinite(x1[m, 0]):
             d = x1[m] - P[m]
             err[m] = np.sqrt(d @ d)
-    dq = joint_error_bound(LA_last, G_m, dx)
     return q, v, P, dq, err
 
 

@@ -123,7 +123,7 @@ class ReferenceStepper:
         tracked = np.isfinite(x0[:, 0]) | np.isfinite(x1[:, 0])
         order = [int(m) for m in level_markers if tracked[m]]
         q, v = q.copy(), v.copy()
-        Jbar_m = np.zeros((nv, 3 * len(order)))
+        dq = np.zeros(nv)
         for j in range(n_sub):
             s = j * dt
             Amat = pin.crba(model, data, q).copy()
@@ -131,7 +131,7 @@ class ReferenceStepper:
             P, J = self.kin.reference_positions_jacobians(q)
             B = self.kin.reference_bias(q, v)
             rows, target = self._lock_rows(q, v, lock_dof, lock_value, lower, upper)
-            J_rows, acc, bias, ptr = [], [], [], [0, len(rows)]
+            J_rows, acc, bias, ptr, dx = [], [], [], [0, len(rows)], []
             for iq, tgt in zip(rows, target, strict=True):
                 e = np.zeros(nv)
                 e[iq - 1] = 1.0
@@ -153,6 +153,7 @@ class ReferenceStepper:
                     J_rows += list(sw * J[m])
                     acc += list(sw * a_task)
                     bias += list(sw * B[m])
+                    dx += list(sw * (xdes - P[m]))
                 ptr.append(len(acc))
             a_post = -kdp * v
             a_post[6:] += kpp * (q_posture[7:] - q[7:])
@@ -160,7 +161,8 @@ class ReferenceStepper:
                 Amat, h, np.array(J_rows).reshape(-1, nv), np.array(acc), np.array(bias),
                 ptr, a_post, damping,
             )  # fmt: skip
-            Jbar_m = Jbar[:, len(rows) :]
+            if dx:
+                dq = Jbar[:, len(rows) :] @ np.array(dx)  # eq. 15, the last step's errors
             qdd = np.linalg.solve(Amat, Gamma - h)
             v = v + qdd * dt
             q = np.asarray(pin.integrate(model, q, v * dt))
@@ -169,12 +171,8 @@ class ReferenceStepper:
             v[6:][low] = np.maximum(v[6:][low], 0.0)
             v[6:][high] = np.minimum(v[6:][high], 0.0)
         P = self.kin.positions(q)
-        dx = []
-        for m in order:
-            target = x1[m] if np.isfinite(x1[m, 0]) else x0[m]
-            dx += list(np.sqrt(row_weight[m]) * (target - P[m]))
         err = np.full(M, np.nan)
         vis = np.isfinite(x1[:, 0])
         err[vis] = np.linalg.norm(x1[vis] - P[vis], axis=1)
-        dq = Jbar_m @ np.array(dx) if dx else np.zeros(nv)
+        del order
         return q, v, P, dq, err

@@ -71,23 +71,26 @@ def prioritized_torque(
     bias: FloatArray,
     level_ptr: np.ndarray,
     posture_acc: FloatArray,
-    want_inverse: bool,
+    dx: FloatArray,
+    want_bound: bool,
     damping: float,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Γ (nv,), the resulting q̈ = A⁻¹ (Γ − b − g) (nv,) and, if ``want_inverse``, ``G``
-    (nv, R) with ``Jbar_⊗ = L_A⁻ᵀ G``: the dynamically consistent generalised inverse of the
-    stacked projected Jacobian J_⊗ = [J_1; J_2|1; ...] (eq. 12) (else an empty array).
+    """Γ (nv,), the resulting q̈ = A⁻¹ (Γ − b − g) (nv,) and, if ``want_bound``, the joint-error
+    bound Δq = Jbar_⊗ Δx_⊗ (eq. 15) for the row errors ``dx`` (R,), where Jbar_⊗ is the
+    dynamically consistent generalised inverse of the stacked projected Jacobian
+    J_⊗ = [J_1; J_2|1; ...] (eq. 12) (else zeros).
 
     Computed in the coordinates ``y = L_Aᵀ q̈`` (A = L_A L_Aᵀ), where the A-weighted norm of
     q̈ is the Euclidean norm of y: the dynamically consistent inverse
     ``Jbar = A⁻¹ Jᵀ (J A⁻¹ Jᵀ)⁺`` is the ordinary pseudo-inverse of ``B = J L_A⁻ᵀ`` and the
-    null-space projector N of eq. 6-11 is an orthogonal projector P in y:
+    null-space projector N of eq. 6-11 is an orthogonal projector ``P = I − W Wᵀ`` in y
+    (W: orthonormal basis of the directions the levels above have used):
 
         y = −L_A⁻¹ (b + g)                     (Γ = 0: free motion)
         level k: C = B_k P = U S Vᵀ             (eigen-decomposition of the smaller of CCᵀ, CᵀC;
                                                   s² < 1e-10 ‖B_k‖² is rank lost)
                  y += V S/(S² + λ²) Uᵀ (F*_k − J̇_k v − B_k y)   (Jbar_k|p of eq. 9-11 applied)
-                 P ← P − V Vᵀ                   (N_k = N_{k-1} − Jbar_k|p J_k|p)
+                 W ← [W, V]                     (N_k = N_{k-1} − Jbar_k|p J_k|p)
         posture: y += P (L_Aᵀ a_p − y)          (Γ_posture = Nᵀ (A a_p + b + g − Γ))
         Γ = A q̈ + b + g = L_A y + b + g
 
@@ -95,7 +98,8 @@ def prioritized_torque(
     Cholesky factorisation of ``CᵀC + λ² I`` instead of an eigen-decomposition (four times
     cheaper at 48 DOF) and the posture gets the matching damped projector
     ``P − (CᵀC + λ² I)⁻¹ CᵀC``. λ² = damping ‖B_k‖² / rows (damped least squares; 0 gives
-    the exact pseudo-inverses of the paper).
+    the exact pseudo-inverses of the paper). The row spaces of the levels are orthogonal in
+    y, so ``Jbar_⊗ Δx = L_A⁻ᵀ Σ_k (level k's inverse) Δx_k``.
 
     Args:
         Amat: joint-space inertia (nv, nv); LA its Cholesky factor.
@@ -105,22 +109,21 @@ def prioritized_torque(
         bias: J̇v (R,).
         level_ptr: (L + 1,) rows of level k are ``level_ptr[k]:level_ptr[k + 1]``.
         posture_acc: a_p (nv,), the posture's joint acceleration.
-        want_inverse: also return G (costs one extra solve per row).
+        dx: (R,) row errors for the bound (ignored unless ``want_bound``).
+        want_bound: compute the bound.
         damping: relative damping of the least squares within a level (DEFAULT_DAMPING).
     """
     nv = Amat.shape[0]
-    R = J.shape[0]
     LAi = np.linalg.inv(LA)  # one BLAS-friendly inverse instead of many substitutions
+    LAiT = np.ascontiguousarray(LAi.T)
     y = -(LAi @ h)
-    P = np.eye(nv)
-    identity = True
-    G = np.zeros((nv, R if want_inverse else 0))
+    yb = np.zeros(nv)  # Σ_k (level k's inverse) dx_k, in y
+    W = np.zeros((nv, 0))
     last = -1
     for k in range(level_ptr.shape[0] - 1):
         if level_ptr[k + 1] > level_ptr[k]:
             last = k
     yp = np.ascontiguousarray(LA.T) @ posture_acc
-    LAiT = np.ascontiguousarray(LAi.T)
     posture_done = False
     for k in range(level_ptr.shape[0] - 1):
         a, b = level_ptr[k], level_ptr[k + 1]
@@ -135,7 +138,10 @@ def prioritized_torque(
         if scale <= 0.0:
             continue
         lam2 = damping * scale / r + 1e-10 * scale
-        C = Bk.copy() if identity else Bk @ P
+        if W.shape[1] == 0:
+            C = Bk
+        else:
+            C = Bk - (Bk @ W) @ np.ascontiguousarray(W.T)  # B_k P
         Ct = np.ascontiguousarray(C.T)
         res = acc[a:b] - bias[a:b] - Bk @ y
         if k == last:
@@ -146,15 +152,12 @@ def prioritized_torque(
             L = np.linalg.cholesky(H)
             # H⁻¹ keeps range(P) in exact arithmetic; projecting again removes the rounding
             # that H's tiny eigenvalues (λ², on the used-up directions) would amplify
-            dy = _chol_solve(L, Ct @ res)
-            y = y + (dy if identity else P @ dy)
-            if want_inverse:
-                Gk = np.linalg.solve(H, Ct)
-                G[:, a:b] = Gk if identity else P @ Gk
+            y = y + _project(W, _chol_solve(L, Ct @ res))
+            if want_bound:
+                yb = yb + _project(W, _chol_solve(L, Ct @ dx[a:b]))
             # posture through the damped projector P - H^-1 CᵀC (symmetric: H commutes with CᵀC)
-            e = yp - y
-            corr = e - _chol_solve(L, CtC @ e)
-            y = y + (corr if identity else P @ corr)
+            e = _project(W, yp - y)
+            y = y + _project(W, e - _chol_solve(L, CtC @ e))
             posture_done = True
             continue
         if r <= nv:
@@ -171,8 +174,8 @@ def prioritized_torque(
                 Vr[:, i] /= np.sqrt(wr[i])
             coef = np.sqrt(wr) / (wr + lam2)  # damped s / (s² + λ²)
             y = y + Vr @ (coef * (UrT @ res))
-            if want_inverse:
-                G[:, a:b] = Vr @ (UrT * coef.reshape(rank, 1))
+            if want_bound:
+                yb = yb + Vr @ (coef * (UrT @ dx[a:b]))
         else:
             w, V = np.linalg.eigh(Ct @ C)
             rank = 0
@@ -184,15 +187,22 @@ def prioritized_torque(
             wr = w[nv - rank :]
             inv = 1.0 / (wr + lam2)
             y = y + Vr @ (inv * (VrT @ (Ct @ res)))
-            if want_inverse:
-                G[:, a:b] = Vr @ ((VrT @ Ct) * inv.reshape(rank, 1))
-        P = P - Vr @ np.ascontiguousarray(Vr.T)
-        identity = False
+            if want_bound:
+                yb = yb + Vr @ (inv * (VrT @ (Ct @ dx[a:b])))
+        W = np.hstack((W, Vr))
     if not posture_done:
-        y = y + P @ (yp - y)
+        y = y + _project(W, yp - y)
     Gamma = LA @ y + h
     qdd = LAiT @ y
-    return Gamma, qdd, G
+    return Gamma, qdd, LAiT @ yb
+
+
+@njit(cache=True)
+def _project(W: FloatArray, e: FloatArray) -> FloatArray:
+    """P e with P = I − W Wᵀ."""
+    if W.shape[1] == 0:
+        return e
+    return e - W @ (np.ascontiguousarray(W.T) @ e)
 
 
 @njit(cache=True)
@@ -201,14 +211,6 @@ def _chol_solve(L: FloatArray, b: FloatArray) -> FloatArray:
     n = L.shape[0]
     z = _tri_solve_lower(L, b.reshape(n, 1))[:, 0]
     return _tri_solve_upper_t(L, z)
-
-
-@njit(cache=True)
-def joint_error_bound(LA: FloatArray, G: FloatArray, dx: FloatArray) -> FloatArray:
-    """Δq = Jbar_⊗ Δx_⊗ = L_A⁻ᵀ (G Δx_⊗) (eq. 15), G from :func:`prioritized_torque`."""
-    if G.shape[1] == 0:
-        return np.zeros(LA.shape[0])
-    return _tri_solve_upper_t(LA, np.ascontiguousarray(G) @ dx)
 
 
 def joint_error_bound_reference(Ainv: FloatArray, Jx: FloatArray, dx: FloatArray) -> FloatArray:

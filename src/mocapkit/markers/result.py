@@ -36,7 +36,7 @@ def joint_error_bounds(
     rows at the solution, Δx their residuals, below the locked coordinates as for direct
     marker control), computed with the same kernel as the OSC's."""
     from mocapkit.markers import rigid_fast
-    from mocapkit.markers.prioritized import DEFAULT_DAMPING, joint_error_bound, prioritized_torque
+    from mocapkit.markers.prioritized import DEFAULT_DAMPING, prioritized_torque
 
     kin = MarkerKinematics(human, names)
     fm = rigid_fast.flatten(human.model, kin.frame_ids)
@@ -59,11 +59,11 @@ def joint_error_bounds(
         dx = ((X[f, vis] - P[vis]) * sw[vis, None]).reshape(-1)
         LA = np.linalg.cholesky(A)
         zeros = np.zeros(len(Jr))
-        _, _, G = prioritized_torque(
+        rows_dx = np.concatenate([np.zeros(len(lock_rows)), dx])
+        _, _, out[f] = prioritized_torque(
             A, LA, h, Jr, zeros, zeros, np.array([0, len(lock_rows), len(Jr)]),
-            np.zeros(human.nv), True, DEFAULT_DAMPING,
+            np.zeros(human.nv), rows_dx, True, DEFAULT_DAMPING,
         )  # fmt: skip
-        out[f] = joint_error_bound(LA, np.ascontiguousarray(G[:, len(lock_rows) :]), dx)
     return out
 
 
