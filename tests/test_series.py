@@ -71,3 +71,32 @@ def test_orientation_series_validation() -> None:
         OrientationSeries(t, [[1.0, 0, 0, 0], [2.0, 0, 0, 0], [1.0, 0, 0, 0]])
     with pytest.raises(DataError, match="sample 0 is partly NaN"):
         OrientationSeries(t, [[np.nan, 0, 0, 0], [1.0, 0, 0, 0], [1.0, 0, 0, 0]])
+
+
+def test_mag_gaps_are_all_nan_rows() -> None:
+    t, g, a = _arrays(6)
+    mag = np.ones((6, 3))
+    mag[2] = np.nan
+    rec = ImuRecording(t, g, a, mag=mag, name="s1")
+    np.testing.assert_array_equal(rec.mag_valid, [True, True, False, True, True, True])
+    assert not ImuRecording(t, g, a).mag_valid.any()
+    mag[4, 1] = np.nan  # partly NaN: not a gap marker
+    with pytest.raises(DataError, match=r"s1.mag: non-finite value at sample 4, column 1 .*gap"):
+        ImuRecording(t, g, a, mag=mag, name="s1")
+    mag[4, 1] = np.inf
+    with pytest.raises(DataError, match=r"s1.mag: non-finite value at sample 4, column 1"):
+        ImuRecording(t, g, a, mag=mag, name="s1")
+
+
+def test_joint_angle_series() -> None:
+    from mocapkit.series import JointAngleSeries
+
+    t = np.arange(3) * 0.1
+    s = JointAngleSeries(t, ["knee_angle_r", "hip_flexion_r"], np.zeros((3, 2)))
+    assert s.column("hip_flexion_r").shape == (3,)
+    with pytest.raises(DataError, match="no coordinate 'ankle'; available: knee_angle_r"):
+        s.column("ankle")
+    with pytest.raises(DataError, match="duplicated coordinate name"):
+        JointAngleSeries(t, ["a", "a"], np.zeros((3, 2)))
+    with pytest.raises(ShapeError, match=r"joints.values: expected shape \(3, 2\)"):
+        JointAngleSeries(t, ["a", "b"], np.zeros((3, 3)))

@@ -55,6 +55,20 @@ def _interpolate_rows(t: FloatArray, x: FloatArray) -> FloatArray:
     return out
 
 
+def _check_mag_gaps(mag: FloatArray, name: str, fix: str) -> None:
+    """Magnetometer rows may be all-NaN (a gap: the filters propagate without the
+    magnetometer there); a partly NaN row or an infinite value is an error."""
+    gap: np.ndarray = np.asarray(np.isnan(mag).all(axis=1))
+    bad = ~np.isfinite(mag) & ~gap[:, None]
+    if bad.any():
+        i, c = (int(v) for v in np.argwhere(bad)[0])
+        raise DataError(
+            f"{name}: non-finite value at sample {i}, column {c} "
+            f"({int(bad.any(axis=1).sum())} bad samples); mark a magnetometer gap with all "
+            f"three components NaN. {fix}"
+        )
+
+
 @dataclass(frozen=True)
 class ImuRecording:
     """One sensor's raw samples, in the sensor frame.
@@ -64,6 +78,9 @@ class ImuRecording:
         gyr: (N, 3) angular rate [rad/s].
         acc: (N, 3) specific force [m/s^2]; reads about +9.81 along the up axis at rest.
         mag: (N, 3) magnetic field (any consistent unit, uT when known) or None (6D).
+            All-NaN rows mark magnetometer gaps (dropouts, or samples outside the
+            magnetometer's own time range); the filters propagate without the
+            magnetometer there (see ``mocapkit.imu.filters.base``).
         name: sensor label, used in every error message.
     """
 
@@ -86,11 +103,11 @@ class ImuRecording:
                 continue
             arr = as_float_array(value, f"{n}.{key}")
             check_shape(arr, f"{n}.{key}", time.shape[0], 3)
-            check_finite(
-                arr,
-                f"{n}.{key}",
-                "Drop those samples or call ImuRecording.with_gaps_interpolated(...).",
-            )
+            fix = "Drop those samples or call ImuRecording.with_gaps_interpolated(...)."
+            if key == "mag":
+                _check_mag_gaps(arr, f"{n}.mag", fix)
+            else:
+                check_finite(arr, f"{n}.{key}", fix)
             fields[key] = _frozen(arr)
         if fields["gyr"] is None or fields["acc"] is None:
             raise DataError(f"{n}: gyr and acc are required")
@@ -148,6 +165,13 @@ class ImuRecording:
     @property
     def has_mag(self) -> bool:
         return self.mag is not None
+
+    @property
+    def mag_valid(self) -> np.ndarray:
+        """(N,) bool: samples with a magnetometer reading (all False in 6D)."""
+        if self.mag is None:
+            return np.zeros(self.n_samples, dtype=bool)
+        return np.asarray(np.isfinite(self.mag).all(axis=1))
 
     def slice(self, start: int, stop: int | None = None) -> ImuRecording:
         """Samples ``start:stop`` as a new recording (shares no writable memory)."""
@@ -238,6 +262,53 @@ class PoseSeries:
         object.__setattr__(self, "time", ori.time)
         object.__setattr__(self, "quat", ori.quat)
         object.__setattr__(self, "pos", _frozen(pos))
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.time.shape[0])
+
+
+@dataclass(frozen=True)
+class JointAngleSeries:
+    """Joint coordinates over time: the meeting point of the IMU and marker pipelines.
+
+    Attributes:
+        time: (N,) [s].
+        names: k coordinate names. Human joints use OpenSim's coordinate names
+            (``hip_flexion_r``, ``knee_angle_r``, ``arm_flex_r``, ``elbow_flex_r``,
+            ``pro_sup_r``...); robot joints use the robot model's joint names.
+        values: (N, k) [rad] for rotational coordinates ([m] for translational ones).
+            NaN marks a frame where a coordinate is unknown (a sensor dropped out).
+    """
+
+    time: FloatArray
+    names: tuple[str, ...]
+    values: FloatArray
+    name: str = "joints"
+
+    def __post_init__(self) -> None:
+        time = as_float_array(self.time, f"{self.name}.time")
+        _check_time(time, self.name)
+        names = tuple(str(s) for s in self.names)
+        if len(set(names)) != len(names):
+            dup = sorted({s for s in names if names.count(s) > 1})
+            raise DataError(f"{self.name}.names: duplicated coordinate name(s) {', '.join(dup)}")
+        values = as_float_array(self.values, f"{self.name}.values")
+        check_shape(values, f"{self.name}.values", time.shape[0], len(names))
+        if np.isinf(values).any():
+            i = int(np.argwhere(np.isinf(values))[0][0])
+            raise DataError(f"{self.name}.values: infinite value at sample {i}")
+        object.__setattr__(self, "time", _frozen(time))
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "values", _frozen(values))
+
+    def column(self, name: str) -> FloatArray:
+        """One coordinate over time; the error lists the available names."""
+        if name not in self.names:
+            raise DataError(
+                f"{self.name}: no coordinate {name!r}; available: {', '.join(self.names)}"
+            )
+        return self.values[:, self.names.index(name)]
 
     @property
     def n_samples(self) -> int:

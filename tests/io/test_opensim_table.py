@@ -48,3 +48,15 @@ def test_malformed(tmp_path: Path) -> None:
     (tmp_path / "y.sto").write_text("endheader\ntime\ta\n0\t1\t2\n")
     with pytest.raises(FileFormatError, match="row 0 has 3 cells, expected 2"):
         read_table(tmp_path / "y.sto")
+
+
+def test_vectorised_parse_falls_back_to_naming_the_bad_row(tmp_path: Path) -> None:
+    """Well-formed files take the vectorised parser; a bad token goes to the row parser."""
+    p = tmp_path / "q.sto"
+    p.write_text("x\nDataType=Quaternion\nendheader\ntime\ta\n0\t1,0,0,0\n0.01\t1,0,zero,0\n")
+    with pytest.raises(FileFormatError, match="row 1: could not convert string to float"):
+        read_table(p)
+    p.write_text("x\nendheader\ntime\ta\tb\n0\t1\t2\n0.01\t3\t4\n")
+    table = read_table(p)
+    np.testing.assert_array_equal(table.data, [[1, 2], [3, 4]])
+    np.testing.assert_array_equal(table.time, [0.0, 0.01])

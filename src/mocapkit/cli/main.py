@@ -18,7 +18,14 @@ from mocapkit.cli.common import (
 from mocapkit.errors import MissingDependencyError, MocapkitError
 
 # Each module adds one command group with ``register(subparsers)``.
-_COMMAND_MODULES: tuple[str, ...] = ("mocapkit.cli.markers_cmd",)
+_COMMAND_MODULES: tuple[str, ...] = (
+    "mocapkit.cli.body_cmd",
+    "mocapkit.cli.demo_cmd",
+    "mocapkit.cli.imu_cmd",
+    "mocapkit.cli.markers_cmd",
+    "mocapkit.cli.suit_cmd",
+    "mocapkit.cli.teleop_cmd",
+)
 
 _EPILOG = """\
 exit codes: 0 success, 1 failed on the input (the message says why and how to fix it),

@@ -83,3 +83,40 @@ def list_broad_trials(directory: str | Path) -> list[Path]:
     if not files:
         raise FileFormatError(f"{d}: no .hdf5 files found (expected BROAD's data_hdf5 trials)")
     return files
+
+
+def read_broad_crop(path: str | Path) -> BroadTrial:
+    """Read a cropped BROAD trial stored as ``.npz`` (same arrays as the HDF5 file, plus
+    ``source_trial`` and ``source_start``), e.g. the bundled demo recording."""
+    p = Path(path)
+    try:
+        data = np.load(p, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise FileFormatError(f"{p}: not a readable .npz file ({exc})") from exc
+    with data:
+        missing = [k for k in (*_REQUIRED, "sampling_rate") if k not in data.files]
+        if missing:
+            raise FileFormatError(f"{p}: missing array(s) {', '.join(missing)}")
+        rate = float(data["sampling_rate"])
+        name = p.stem
+        start = int(data["source_start"]) if "source_start" in data.files else 0
+        gyr, acc, mag = (np.asarray(data[k], dtype=np.float64) for k in _REQUIRED[:3])
+        quat = np.asarray(data["opt_quat"], dtype=np.float64)
+        movement = np.asarray(data["movement"], dtype=bool).reshape(-1)
+    time = (start + np.arange(len(gyr))) / rate
+    meta = {"sampling_rate": rate, "source": str(p), "source_start": start}
+    imu = ImuRecording(time, gyr, acc, mag, name=name, meta=meta)
+    ref = OrientationSeries(time, quat, name=f"{name}.reference")
+    movement.setflags(write=False)
+    pos = np.full((len(gyr), 3), np.nan)
+    pos.setflags(write=False)
+    return BroadTrial(name=name, imu=imu, reference=ref, movement=movement, position=pos)
+
+
+def bundled_demo_trial() -> BroadTrial:
+    """The 30 s BROAD crop shipped with mocapkit (``mocapkit/data/broad``, CC BY 4.0)."""
+    from importlib.resources import as_file, files
+
+    resource = files("mocapkit") / "data" / "broad" / "07_undisturbed_fast_rotation_B_crop.npz"
+    with as_file(resource) as path:
+        return read_broad_crop(path)

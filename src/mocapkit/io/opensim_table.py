@@ -8,6 +8,7 @@ holds and reports ``in_degrees`` so callers convert at the edge.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -97,6 +98,36 @@ def write_table(
     return p
 
 
+def _parse_block_fast(block: list[str], k: int, quat: bool) -> tuple[FloatArray, FloatArray] | None:
+    """Vectorised parse of well-formed rows (numpy does the float conversion); None when
+    any row is irregular, so the row-by-row parser can name it."""
+    n = len(block)
+    if n == 0:
+        return None
+    tabs = np.fromiter((line.count("\t") for line in block), dtype=np.int64, count=n)
+    if (tabs != k).any():
+        return None
+    if quat:
+        commas = np.fromiter((line.count(",") for line in block), dtype=np.int64, count=n)
+        if (commas != 3 * k).any():
+            return None
+    text = " ".join(block).replace("\t", " ").replace(",", " ")
+    with warnings.catch_warnings():
+        # a non-numeric token stops the parse (a ValueError, or a DeprecationWarning and a
+        # short result in older numpy): the row-by-row parser then names the bad row
+        warnings.simplefilter("ignore", DeprecationWarning)
+        try:
+            flat = np.fromstring(text, dtype=np.float64, sep=" ")
+        except ValueError:
+            return None
+    width = 1 + k * (4 if quat else 1)
+    if flat.size != n * width:
+        return None
+    table = flat.reshape(n, width)
+    data = table[:, 1:].reshape(n, k, 4) if quat else table[:, 1:].copy()
+    return table[:, 0].copy(), data
+
+
 def read_table(path: str | Path) -> OpenSimTable:
     """Read a ``.mot``/``.sto`` file (numeric or quaternion columns)."""
     p = Path(path)
@@ -121,11 +152,19 @@ def read_table(path: str | Path) -> OpenSimTable:
     labels = lines[end + 1].split("\t")
     if labels[0].strip().lower() != "time":
         raise FileFormatError(f"{p}: first column must be 'time', got {labels[0]!r}")
-    rows = [line.split("\t") for line in lines[end + 2 :] if line.strip()]
+    block = [line for line in lines[end + 2 :] if line.strip()]
+    first = block[0].split("\t") if block else []
     quat = header.get("DataType", "").lower() == "quaternion" or bool(
-        rows and len(rows[0]) > 1 and "," in rows[0][1]
+        len(first) > 1 and "," in first[1]
     )
-    n, k = len(rows), len(labels) - 1
+    n, k = len(block), len(labels) - 1
+    fast = _parse_block_fast(block, k, quat)
+    if fast is not None:
+        in_deg = header.get("inDegrees", "no").lower() == "yes"
+        return OpenSimTable(
+            fast[0], [s.strip() for s in labels[1:]], fast[1], in_degrees=in_deg, header=header
+        )
+    rows = [line.split("\t") for line in block]
     time = np.empty(n)
     data = np.empty((n, k, 4)) if quat else np.empty((n, k))
     for i, cells in enumerate(rows):

@@ -1,8 +1,11 @@
 """Orientation filters. Importing this package registers the built-in filters."""
 
+from mocapkit.imu.filters import bachmann, miller  # noqa: F401  (register the filters)
 from mocapkit.imu.filters.base import (
     FilterParams,
+    FilterState,
     OrientationFilter,
+    RunReport,
     available_filters,
     make_filter,
     register_filter,
@@ -10,7 +13,9 @@ from mocapkit.imu.filters.base import (
 
 __all__ = [
     "FilterParams",
+    "FilterState",
     "OrientationFilter",
+    "RunReport",
     "available_filters",
     "make_filter",
     "register_filter",

@@ -1,0 +1,173 @@
+"""numba kernels of the body kinematics: one frame (streaming) and a batch loop over frames.
+
+Readable reference: :mod:`mocapkit.body.joint_angles` (numpy through mocapkit.geometry).
+The two agree to 1e-9 (tests/body/test_kinematics.py). The Euler decomposition here is
+the intrinsic-XYZ case of the direct method of Bernardes and Viollet (2022) used by
+:func:`mocapkit.geometry.euler_from_quat`, specialised so it needs no allocation.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from mocapkit.geometry.euler import GIMBAL_TOLERANCE
+
+_PI = math.pi
+
+
+@njit(cache=True, inline="always")
+def _wrap(a: float) -> float:
+    return _PI - np.mod(_PI - a, 2.0 * _PI)
+
+
+@njit(cache=True, inline="always")
+def _mul(a, b, out):
+    """out = a * b (Hamilton); out may not alias a or b."""
+    w1, x1, y1, z1 = a[0], a[1], a[2], a[3]
+    w2, x2, y2, z2 = b[0], b[1], b[2], b[3]
+    out[0] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
+    out[1] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
+    out[2] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
+    out[3] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
+
+
+@njit(cache=True, inline="always")
+def _conj_mul(a, b, out):
+    """out = conj(a) * b."""
+    w1, x1, y1, z1 = a[0], -a[1], -a[2], -a[3]
+    w2, x2, y2, z2 = b[0], b[1], b[2], b[3]
+    out[0] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
+    out[1] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
+    out[2] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
+    out[3] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
+
+
+@njit(cache=True)
+def euler_xyz_intrinsic(q, out):
+    """Intrinsic XYZ angles of unit q into out (3,); returns True in gimbal lock
+    (then the third angle is 0, as in mocapkit.geometry.euler_from_quat)."""
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    w, qx, qy, qz = q[0] / n, q[1] / n, q[2] / n, q[3] / n
+    # extrinsic zyx: i = z, j = y, k = x, odd permutation (parity -1)
+    qi, qj, qk = qz, qy, -qx
+    a = w - qj
+    b = qi + qk
+    c = qj + w
+    d = qk - qi
+    middle = 2.0 * math.atan2(math.hypot(c, d), math.hypot(a, b))
+    half_sum = math.atan2(b, a)
+    half_diff = math.atan2(d, c)
+    at_zero = abs(middle) <= GIMBAL_TOLERANCE
+    at_pi = abs(middle - _PI) <= GIMBAL_TOLERANCE
+    if at_zero:
+        first_e, third_e = 0.0, 2.0 * half_sum
+    elif at_pi:
+        first_e, third_e = 0.0, 2.0 * half_diff
+    else:
+        first_e, third_e = half_sum - half_diff, half_sum + half_diff
+    out[0] = _wrap(-third_e)
+    out[1] = middle - 0.5 * _PI
+    out[2] = _wrap(first_e)
+    return at_zero or at_pi
+
+
+@njit(cache=True)
+def frame_kernel(
+    q_in, t, mount, heading, q_b, parents, q_wg, signs, offsets, seg_idx, ang_idx,
+    hold, max_hold, near_limit,
+    last_q, last_t, cont, have_prev, last_third,
+    q_seg, out, stale, gimbal, near, work,
+):  # fmt: skip
+    """One frame. Inputs q_in (S, 4) (NaN rows: missing); state arrays are updated in place:
+    last_q (S, 4), last_t (S,), cont (S, 3) continuous raw angles, have_prev (S,),
+    last_third (S,). Outputs: q_seg (S, 4), out (K,), stale (S,), gimbal (S,), near (S,)."""
+    n_seg = q_in.shape[0]
+    qs = work[0]
+    tmp = work[1]
+    rel = work[2]
+    ang = work[3]
+    for i in range(n_seg):
+        ok = True
+        for c in range(4):
+            if not math.isfinite(q_in[i, c]):
+                ok = False
+        if ok:
+            for c in range(4):
+                last_q[i, c] = q_in[i, c]
+                qs[c] = q_in[i, c]
+            last_t[i] = t
+            stale[i] = False
+        else:
+            stale[i] = True
+            if hold and math.isfinite(last_t[i]) and t - last_t[i] <= max_hold + 1e-12:
+                for c in range(4):
+                    qs[c] = last_q[i, c]
+                ok = True
+        if ok:
+            _mul(heading[i], qs, tmp)
+            _mul(tmp, mount[i], rel)
+            for c in range(4):
+                q_seg[i, c] = rel[c]
+        else:
+            for c in range(4):
+                q_seg[i, c] = np.nan
+    for i in range(n_seg):
+        gimbal[i] = False
+        near[i] = False
+        p = parents[i]
+        if p < 0:
+            _conj_mul(q_wg, q_seg[i], rel)
+        else:
+            _conj_mul(q_seg[p], q_seg[i], rel)
+        _conj_mul(q_b[i], rel, tmp)
+        _mul(tmp, q_b[i], rel)
+        if not (math.isfinite(rel[0]) and math.isfinite(rel[1])
+                and math.isfinite(rel[2]) and math.isfinite(rel[3])):  # fmt: skip
+            ang[0] = np.nan
+            continue
+        g = euler_xyz_intrinsic(rel, ang)
+        if g:
+            s = 1.0 if ang[1] > 0.0 else -1.0
+            ang[0] = _wrap(ang[0] - s * last_third[i])
+            ang[2] = last_third[i]
+            gimbal[i] = True
+        else:
+            last_third[i] = ang[2]
+        near[i] = abs(ang[1]) > near_limit
+        for k in range(3):
+            if have_prev[i]:
+                cont[i, k] = cont[i, k] + _wrap(ang[k] - cont[i, k])
+            else:
+                cont[i, k] = ang[k]
+        have_prev[i] = True
+    for m in range(seg_idx.shape[0]):
+        i = seg_idx[m]
+        k = ang_idx[m]
+        p = parents[i]
+        valid = math.isfinite(q_seg[i, 0]) and (p < 0 or math.isfinite(q_seg[p, 0]))
+        if valid:
+            out[m] = signs[i, k] * cont[i, k] + offsets[i, k]
+        else:
+            out[m] = np.nan
+
+
+@njit(cache=True)
+def batch_kernel(
+    q_in, time, mount, heading, q_b, parents, q_wg, signs, offsets, seg_idx, ang_idx,
+    hold, max_hold, near_limit,
+    last_q, last_t, cont, have_prev, last_third,
+    q_seg, out, stale, gimbal, near,
+):  # fmt: skip
+    """frame_kernel over every frame: q_in (N, S, 4) -> q_seg (N, S, 4), out (N, K),
+    stale, gimbal and near (N, S); the state arrays carry over (split runs)."""
+    work = np.empty((4, 4))
+    for n in range(q_in.shape[0]):
+        frame_kernel(
+            q_in[n], time[n], mount, heading, q_b, parents, q_wg, signs, offsets,
+            seg_idx, ang_idx, hold, max_hold, near_limit,
+            last_q, last_t, cont, have_prev, last_third,
+            q_seg[n], out[n], stale[n], gimbal[n], near[n], work,
+        )  # fmt: skip

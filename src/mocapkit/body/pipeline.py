@@ -1,0 +1,165 @@
+"""One call from sensor orientations to calibrated joint angles (used by the CLI, the
+benchmarks and the real-recording tests): align time bases, crop, calibrate (from a pose
+or automatically), then compute segment orientations and joint angles."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from mocapkit.body.calibration import (
+    POSES_DEG,
+    BodyCalibration,
+    HeadingFixed,
+    HeadingFromSensor,
+    calibrate_pose,
+    find_still_window,
+)
+from mocapkit.body.functional import calibrate_functional
+from mocapkit.body.joint_angles import BodyAngles
+from mocapkit.body.kinematics import body_angles
+from mocapkit.body.sensor_tree import SensorTree
+from mocapkit.body.timebase import align_orientations
+from mocapkit.errors import ConfigError, DataError
+from mocapkit.series import OrientationSeries
+
+CALIBRATIONS = ("auto", *POSES_DEG)
+
+
+@dataclass(frozen=True)
+class BodyResult:
+    calibration: BodyCalibration
+    body: BodyAngles
+    segments: dict[str, OrientationSeries]
+
+
+def crop(
+    series: Mapping[str, OrientationSeries], start: float | None, stop: float | None
+) -> dict[str, OrientationSeries]:
+    """Samples with ``start <= t <= stop`` of every series."""
+    out = {}
+    for k, s in series.items():
+        keep = np.ones(s.n_samples, dtype=bool)
+        if start is not None:
+            keep &= s.time >= start
+        if stop is not None:
+            keep &= s.time <= stop
+        if keep.sum() < 2:
+            raise DataError(
+                f"sensor {k!r}: fewer than 2 samples between {start} and {stop} s "
+                f"(recording {s.time[0]:.3f}-{s.time[-1]:.3f} s)"
+            )
+        out[k] = OrientationSeries(s.time[keep], s.quat[keep], name=s.name, frame=s.frame)
+    return out
+
+
+def calibrate(
+    tree: SensorTree,
+    orientations: Mapping[str, OrientationSeries],
+    *,
+    calibration: str = "auto",
+    window: tuple[float, float] | None = None,
+    heading: HeadingFixed | HeadingFromSensor | None = None,
+    heading_alignment: str = "shared",
+    root_reference: str = "body",
+    still_duration_s: float = 1.0,
+) -> BodyCalibration:
+    """Calibrate ``tree`` on ``orientations`` (one time base).
+
+    ``calibration="auto"`` estimates mountings and heading from a still window and the
+    motion (:func:`calibrate_functional`); a pose name calibrates from that pose held in
+    ``window`` (default: the first still window), with ``heading`` (default: world x).
+    """
+    if calibration not in CALIBRATIONS:
+        raise ConfigError(
+            f"calibration: expected one of {', '.join(CALIBRATIONS)}, got {calibration!r}"
+        )
+    if window is None:
+        window = find_still_window(orientations, still_duration_s)
+    if calibration == "auto":
+        cal = calibrate_functional(
+            tree, orientations, window, heading=heading, heading_alignment=heading_alignment
+        )
+    else:
+        cal = calibrate_pose(
+            tree, orientations, window, pose=calibration, heading=heading or HeadingFixed(0.0)
+        )
+    return cal.with_root_reference(root_reference)
+
+
+def run_body(
+    tree: SensorTree,
+    orientations: Mapping[str, OrientationSeries],
+    *,
+    calibration: str | BodyCalibration = "auto",
+    placement: Mapping[str, OrientationSeries] | None = None,
+    window: tuple[float, float] | None = None,
+    start: float | None = None,
+    stop: float | None = None,
+    dropout: str = "nan",
+    max_hold_s: float = 0.5,
+    backend: str = "fast",
+    **calibrate_kwargs: Any,
+) -> BodyResult:
+    """Sensor orientations -> calibration, joint angles and segment orientations.
+
+    Args:
+        orientations: {sensor: q_world_sensor series}; other sensors than the tree's are
+            ignored; time bases are aligned (slerp) when they differ.
+        calibration: ``"auto"``, a pose name, or a ready BodyCalibration.
+        placement: a separate calibration recording (OpenSense's placement file); when
+            given, the calibration is computed on it instead of on ``orientations``.
+        start, stop: crop [s] before anything else (e.g. a filter's convergence).
+    """
+    tree.check_sensors(list(orientations))
+    use = {s.sensor: orientations[s.sensor] for s in tree.segments}
+    use = align_orientations(crop(use, start, stop))
+    if isinstance(calibration, BodyCalibration):
+        cal = calibration
+    else:
+        source = use
+        if placement is not None:
+            tree.check_sensors(list(placement))
+            source = align_orientations({s.sensor: placement[s.sensor] for s in tree.segments})
+            if window is None:
+                t0 = float(source[tree.segments[0].sensor].time[0])
+                window = (t0, t0)
+        cal = calibrate(tree, source, calibration=calibration, window=window, **calibrate_kwargs)
+    body, segments = body_angles(
+        tree, cal, use, dropout=dropout, max_hold_s=max_hold_s, backend=backend
+    )
+    return BodyResult(cal, body, segments)
+
+
+def summary(result: BodyResult) -> dict[str, Any]:
+    """JSON-ready figures: per coordinate range [deg] and missing samples; calibration."""
+    a = result.body.angles
+    coords = {}
+    for k, name in enumerate(a.names):
+        v = np.rad2deg(a.values[:, k])
+        good = np.isfinite(v)
+        coords[name] = {
+            "min_deg": float(v[good].min()) if good.any() else None,
+            "max_deg": float(v[good].max()) if good.any() else None,
+            "missing": int((~good).sum()),
+        }
+    rate = 1.0 / float(np.median(np.diff(a.time))) if a.n_samples > 1 else None
+    cal = result.calibration
+    return {
+        "n_frames": a.n_samples,
+        "rate_hz": rate,
+        "duration_s": float(a.time[-1] - a.time[0]) if a.n_samples else 0.0,
+        "calibration": {
+            "method": cal.method,
+            "heading_deg": float(np.rad2deg(cal.heading_rad)),
+            "window_s": list(cal.window),
+            **{k: v for k, v in cal.diagnostics.items() if not isinstance(v, dict)},
+        },
+        "gimbal_lock": {k: int(v.size) for k, v in result.body.gimbal.items()},
+        "near_gimbal": dict(result.body.near_gimbal),
+        "held": dict(result.body.held),
+        "coordinates": coords,
+    }

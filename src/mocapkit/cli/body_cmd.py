@@ -1,0 +1,252 @@
+"""``mocapkit body``: sensor orientations -> calibrated segment orientations and joint angles.
+
+mocapkit body presets [--json]
+mocapkit body angles RECORDING --preset full_body_15 -o angles.mot [--bvh body.bvh] --json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from mocapkit.cli.common import EXIT_OK, print_json
+from mocapkit.errors import ConfigError
+from mocapkit.series import OrientationSeries
+
+log = logging.getLogger("mocapkit.body")
+
+_FORMATS = ("auto", "qmt-mat", "opensense-sto", "device")
+
+
+def _format(path: Path, fmt: str) -> str:
+    if fmt != "auto":
+        return fmt
+    if path.suffix.lower() == ".mat":
+        return "qmt-mat"
+    if path.suffix.lower() in (".sto", ".mot"):
+        return "opensense-sto"
+    if path.is_dir():
+        return "device"
+    raise ConfigError(
+        f"{path}: cannot tell the recording format from its name; give --format "
+        f"({', '.join(_FORMATS[1:])})"
+    )
+
+
+def _load_orientations(
+    path: Path, fmt: str, filter_name: str | None = None, mode: str = "9d"
+) -> dict[str, OrientationSeries]:
+    """Sensor orientations from a recording (dispatch to the io readers): the recording's
+    own orientations, or those of a mocapkit filter run on its raw samples."""
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such file or directory")
+    fmt = _format(path, fmt)
+    if filter_name is not None:
+        from mocapkit.imu.filters.base import make_filter
+        from mocapkit.series import ImuRecording
+
+        recs: dict[str, ImuRecording]
+        if fmt == "qmt-mat":
+            from mocapkit.io.qmt_mat import read_qmt_mat
+
+            recs = dict(read_qmt_mat(path).imu)
+        elif fmt == "opensense-sto":
+            raise ConfigError(f"{path}: an orientation table has no raw samples to filter")
+        else:
+            from mocapkit.io.imu_files import read_imu_recordings
+
+            recs = read_imu_recordings(path)
+        return {
+            name: make_filter(filter_name, rec.rate_hz).run_recording(rec, use_mag=mode == "9d")
+            for name, rec in recs.items()
+        }
+    if fmt == "qmt-mat":
+        from mocapkit.io.qmt_mat import read_qmt_mat
+
+        return dict(read_qmt_mat(path).orientation)
+    if fmt == "device":
+        from mocapkit.io.imu_files import read_device_orientations
+
+        return read_device_orientations(path)
+    from mocapkit.io.opensense import read_orientations_sto
+
+    return read_orientations_sto(path)
+
+
+def _parse_map(items: list[str]) -> dict[str, str]:
+    out = {}
+    for item in items:
+        if "=" not in item:
+            raise ConfigError(f"--map: expected SEGMENT=SENSOR, got {item!r}")
+        seg, sensor = item.split("=", 1)
+        out[seg.strip()] = sensor.strip()
+    return out
+
+
+def _cmd_presets(args: argparse.Namespace) -> int:
+    from mocapkit.body.sensor_tree import SensorTree
+
+    info: dict[str, dict[str, Any]] = {}
+    for name in SensorTree.preset_names():
+        tree = SensorTree.preset(name)
+        info[name] = {
+            "sensors": len(tree.segments),
+            "segments": {s.name: s.sensor for s in tree.segments},
+            "coordinates": list(tree.coordinate_names),
+            "description": tree.description,
+        }
+    if args.json:
+        print_json(info)
+    else:
+        for name, d in info.items():
+            print(f"{name:18s} {d['sensors']:2d} sensors: {', '.join(d['segments'])}")
+    return EXIT_OK
+
+
+def _cmd_angles(args: argparse.Namespace) -> int:
+    from mocapkit.body.calibration import BodyCalibration, HeadingFixed, HeadingFromSensor
+    from mocapkit.body.pipeline import run_body, summary
+    from mocapkit.body.sensor_tree import SensorTree
+
+    tree = SensorTree.from_yaml(args.tree) if args.tree else SensorTree.preset(args.preset)
+    if args.map:
+        tree = tree.with_sensor_names(_parse_map(args.map))
+    orientations = _load_orientations(Path(args.recording), args.format, args.filter, args.mode)
+    placement = _load_orientations(Path(args.placement), args.format) if args.placement else None
+    heading: HeadingFixed | HeadingFromSensor | None = None
+    if args.heading_sensor:
+        heading = HeadingFromSensor(args.heading_sensor, args.heading_axis)
+    elif args.heading_deg is not None:
+        import math
+
+        heading = HeadingFixed(math.radians(args.heading_deg))
+    calibration: Any = args.calibration
+    kwargs: dict[str, Any] = {}
+    if args.calibration_in:
+        calibration = BodyCalibration.from_dict(json.loads(Path(args.calibration_in).read_text()))
+    else:
+        kwargs = {
+            "heading": heading,
+            "heading_alignment": args.heading_alignment,
+            "root_reference": args.root_reference,
+        }
+    t0 = time.perf_counter()
+    result = run_body(
+        tree,
+        orientations,
+        calibration=calibration,
+        placement=placement,
+        window=tuple(args.calib_window) if args.calib_window else None,
+        start=args.start,
+        stop=args.stop,
+        dropout=args.dropout,
+        max_hold_s=args.max_hold_s,
+        **kwargs,
+    )
+    elapsed = time.perf_counter() - t0
+    outputs = {}
+    if args.output:
+        from mocapkit.io.joint_angles_mot import write_joint_angles_mot
+
+        outputs["mot"] = str(write_joint_angles_mot(args.output, result.body.angles))
+    if args.bvh:
+        from mocapkit.body.skeleton import bvh_from_segments
+        from mocapkit.io.bvh import write_bvh
+
+        motion = bvh_from_segments(
+            tree, result.segments, result.calibration.q_world_ground,
+            bone_names=_parse_map(args.bone) if args.bone else None,
+        )  # fmt: skip
+        outputs["bvh"] = str(write_bvh(args.bvh, motion))
+    if args.segments:
+        from mocapkit.io.opensense import write_orientations_sto
+
+        outputs["segments"] = str(write_orientations_sto(args.segments, result.segments))
+    if args.calibration_out:
+        Path(args.calibration_out).write_text(json.dumps(result.calibration.to_dict(), indent=2))
+        outputs["calibration"] = args.calibration_out
+    report = summary(result)
+    report.update({"tree": tree.name, "outputs": outputs, "seconds": elapsed})
+    if args.json:
+        print_json(report)
+    else:
+        cal = report["calibration"]
+        print(
+            f"{tree.name}: {report['n_frames']} frames at {report['rate_hz']:.1f} Hz, "
+            f"calibration {cal['method']} (heading {cal['heading_deg']:.1f} deg) "
+            f"in {elapsed:.2f} s",
+            file=sys.stderr,
+        )
+        for name, c in report["coordinates"].items():
+            if c["min_deg"] is None:
+                print(f"  {name:20s} no data")
+            else:
+                miss = f"  ({c['missing']} missing)" if c["missing"] else ""
+                print(f"  {name:20s} {c['min_deg']:8.1f} .. {c['max_deg']:8.1f} deg{miss}")
+    return EXIT_OK
+
+
+def register(subparsers: Any) -> None:
+    p = subparsers.add_parser("body", help="sensor orientations -> body joint angles")
+    sub = p.add_subparsers(dest="body_command", metavar="SUBCOMMAND")
+    pr = sub.add_parser("presets", help="list the built-in sensor trees")
+    pr.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    pr.set_defaults(func=_cmd_presets)
+
+    a = sub.add_parser(
+        "angles",
+        help="calibrate and compute joint angles from a recording",
+        description="Recording formats: qmt full-body .mat (sensor quaternions), OpenSense "
+        "quaternion .sto, x-IMU3 export directories and Xsens exports (device orientations; "
+        "or --filter on the raw samples). Writes OpenSim .mot (degrees), BVH, segment "
+        "orientations (.sto).",
+    )
+    a.add_argument("recording", help="recording file")
+    a.add_argument(
+        "--format",
+        choices=_FORMATS,
+        default="auto",
+        help="device: an x-IMU3 export directory or Xsens exports (their own orientations)",
+    )
+    a.add_argument(
+        "--filter",
+        help="run this mocapkit orientation filter (miller, bachmann) on the raw samples "
+        "instead of using the recording's own orientations",
+    )
+    a.add_argument("--mode", choices=("9d", "6d"), default="9d", help="with --filter")
+    tree = a.add_mutually_exclusive_group()
+    tree.add_argument("--preset", default="full_body_15", help="built-in tree (see 'body presets')")
+    tree.add_argument("--tree", help="sensor tree YAML file")
+    a.add_argument("--map", action="append", metavar="SEGMENT=SENSOR", help="rename a sensor")
+    a.add_argument(
+        "--calibration",
+        default="auto",
+        choices=("auto", "npose", "tpose", "anatomical", "connectors_up"),
+        help="auto: mountings and heading from a still window and the motion",
+    )
+    a.add_argument("--calib-window", nargs=2, type=float, metavar=("T0", "T1"))
+    a.add_argument("--placement", help="separate calibration recording (OpenSense placement .sto)")
+    a.add_argument("--heading-sensor", help="sensor whose --heading-axis points forward")
+    a.add_argument("--heading-axis", default="x", help="x, y, z, -x, -y or -z")
+    a.add_argument(
+        "--heading-deg", type=float, help="body heading at calibration [deg from world x]"
+    )
+    a.add_argument("--heading-alignment", choices=("shared", "pose"), default="shared")
+    a.add_argument("--root-reference", choices=("body", "world"), default="body")
+    a.add_argument("--dropout", choices=("nan", "hold"), default="nan")
+    a.add_argument("--max-hold-s", type=float, default=0.5)
+    a.add_argument("--start", type=float, help="ignore samples before this time [s]")
+    a.add_argument("--stop", type=float, help="ignore samples after this time [s]")
+    a.add_argument("-o", "--output", help="joint angles .mot")
+    a.add_argument("--bvh", help="BVH file of the segment orientations")
+    a.add_argument("--bone", action="append", metavar="SEGMENT=BONE", help="BVH bone name")
+    a.add_argument("--segments", help="segment orientations .sto (quaternions)")
+    a.add_argument("--calibration-out", help="write the calibration (JSON)")
+    a.add_argument("--calibration-in", help="use a saved calibration (JSON)")
+    a.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    a.set_defaults(func=_cmd_angles)

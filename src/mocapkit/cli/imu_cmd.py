@@ -1,0 +1,240 @@
+"""``mocapkit imu``: evaluate filters on BROAD, run a filter on a recording, calibrate
+a magnetometer. Parsing and printing only; the work is in ``mocapkit.imu``."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mocapkit.cli.common import EXIT_OK, print_json, progress
+from mocapkit.errors import ConfigError, DataError
+
+DEVICE = "device"
+
+
+def _param(text: str) -> tuple[str, float]:
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    try:
+        return key.strip(), float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{key}: {value!r} is not a number") from None
+
+
+def _filter_names() -> list[str]:
+    from mocapkit.imu.filters import available_filters
+
+    return available_filters()
+
+
+def register(sub: Any) -> None:
+    imu = sub.add_parser("imu", help="inertial orientation: evaluate, run, calibrate")
+    cmds = imu.add_subparsers(dest="imu_command", metavar="SUBCOMMAND")
+    names = _filter_names()
+
+    ev = cmds.add_parser(
+        "evaluate",
+        help="run a filter on every BROAD trial in DIR and print BROAD's errors",
+        description="Errors in degrees: RMS over the movement phases (BROAD's metric). In "
+        "6D the heading is unobservable: one constant heading offset is removed first, so "
+        "total_deg is the heading-aligned total. samples_per_s is the single-thread "
+        "throughput of the chosen backend (the numba fast path by default), compilation "
+        "excluded.",
+    )
+    ev.add_argument("directory", type=Path, help="directory of BROAD .hdf5 trials")
+    ev.add_argument("--filter", required=True, choices=names, dest="filter_name")
+    ev.add_argument("--mode", choices=["9d", "6d"], default="9d")
+    ev.add_argument("--backend", choices=["fast", "reference"], default="fast")
+    ev.add_argument("--param", type=_param, action="append", default=[], metavar="NAME=VALUE")
+    ev.add_argument(
+        "--remove-gyr-bias",
+        action="store_true",
+        help="subtract the gyroscope bias measured over each trial's first rest period",
+    )
+    ev.add_argument("--json", action="store_true", help="print one JSON object")
+    ev.set_defaults(func=_evaluate)
+
+    run = cmds.add_parser(
+        "run",
+        help="orientation of a recording -> OpenSense-style quaternion .sto",
+        description="Reads a BROAD .hdf5, a mocapkit .csv, an x-IMU3 export (one sensor "
+        "or a directory of sensors) or Xsens exports. Sensors with their own clocks are "
+        "put on one uniform time base (slerp, never extrapolated) for the table. "
+        "'--filter device' writes the orientation the device computed itself.",
+    )
+    run.add_argument("path", type=Path)
+    run.add_argument("--filter", required=True, choices=[*names, DEVICE], dest="filter_name")
+    run.add_argument("-o", "--output", type=Path, required=True, help="output .sto file")
+    run.add_argument("--mode", choices=["9d", "6d"], default="9d")
+    run.add_argument("--sensor", action="append", default=[], help="only this sensor")
+    run.add_argument("--param", type=_param, action="append", default=[], metavar="NAME=VALUE")
+    run.add_argument("--remove-gyr-bias", action="store_true")
+    run.set_defaults(func=_run)
+
+    cal = cmds.add_parser(
+        "calibrate-mag",
+        help="hard- and soft-iron magnetometer calibration (ellipsoid fit)",
+        description="Fit the magnetometer readings of a rotation sequence. With -o the "
+        "calibrated recording of one sensor is written as a mocapkit CSV.",
+    )
+    cal.add_argument("path", type=Path)
+    cal.add_argument("--sensor", action="append", default=[])
+    cal.add_argument("--model", choices=["ellipsoid", "sphere"], default="ellipsoid")
+    cal.add_argument("--field-strength", type=float, default=None)
+    cal.add_argument("-o", "--output", type=Path, default=None, help="calibrated .csv")
+    cal.add_argument("--json", action="store_true")
+    cal.set_defaults(func=_calibrate_mag)
+
+
+def _bias_remover(enabled: bool) -> Any:
+    if not enabled:
+        return None
+    from mocapkit.imu.calibration import calibrate_from_rest, remove_gyro_bias
+
+    def prepare(trial: Any) -> Any:
+        imu = trial.imu if hasattr(trial, "imu") else trial
+        return remove_gyro_bias(imu, calibrate_from_rest(imu, use_mag=False).gyr_bias)
+
+    return prepare
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from mocapkit.imu.evaluation import evaluate
+    from mocapkit.io.broad import list_broad_trials, read_broad_trial
+
+    paths = list_broad_trials(args.directory)
+    trials = (
+        read_broad_trial(p)
+        for p in progress(paths, f"{args.filter_name} {args.mode}", total=len(paths))
+    )
+    result = evaluate(
+        trials,
+        args.filter_name,
+        args.mode,
+        args.backend,
+        prepare=_bias_remover(args.remove_gyr_bias),
+        **dict(args.param),
+    )
+    if args.json:
+        print_json(result.as_json())
+        return EXIT_OK
+    out = sys.stdout
+    aligned = " (heading-aligned total)" if args.mode == "6d" else ""
+    out.write(f"filter {args.filter_name}, {args.mode}{aligned}, backend {args.backend}\n")
+    out.write(f"{'trial':40s} {'total':>8s} {'heading':>8s} {'incl.':>8s}  [deg]\n")
+    for t in result.trials:
+        d = t.errors.as_degrees()
+        out.write(
+            f"{t.name:40s} {d['total_deg']:8.3f} {d['heading_deg']:8.3f} "
+            f"{d['inclination_deg']:8.3f}\n"
+        )
+    out.write(
+        f"{'mean':40s} {result.mean_deg('total'):8.3f} {result.mean_deg('heading'):8.3f} "
+        f"{result.mean_deg('inclination'):8.3f}\n"
+    )
+    out.write(f"throughput: {result.samples_per_s:,.0f} samples/s (single thread)\n")
+    return EXIT_OK
+
+
+def _select(items: dict[str, Any], wanted: list[str], path: Path) -> dict[str, Any]:
+    if not wanted:
+        return items
+    missing = [s for s in wanted if s not in items]
+    if missing:
+        raise DataError(
+            f"--sensor: {', '.join(missing)} not in {path}; available: {', '.join(items)}"
+        )
+    return {k: items[k] for k in wanted}
+
+
+def _run(args: argparse.Namespace) -> int:
+    from mocapkit.imu.filters import make_filter
+    from mocapkit.imu.resample import common_time_base, resample_orientation
+    from mocapkit.io.imu_files import read_device_orientations, read_imu_recordings
+    from mocapkit.io.opensim_table import write_table
+    from mocapkit.series import OrientationSeries
+
+    series: dict[str, OrientationSeries] = {}
+    if args.filter_name == DEVICE:
+        series = _select(read_device_orientations(args.path), args.sensor, args.path)
+    else:
+        recs = _select(read_imu_recordings(args.path), args.sensor, args.path)
+        prepare = _bias_remover(args.remove_gyr_bias)
+        for name, rec in progress(list(recs.items()), args.filter_name, total=len(recs)):
+            rec = prepare(rec) if prepare else rec
+            filt = make_filter(args.filter_name, rec.rate_hz, **dict(args.param))
+            series[name] = filt.run_recording(rec, use_mag=args.mode == "9d")
+            report = filt.last_report
+            if report.mag_gaps or report.acc_rejected or report.mag_rejected:
+                print(
+                    f"{name}: {report.mag_gaps} magnetometer gaps and "
+                    f"{report.mag_rejected} rejected samples processed as 6D, "
+                    f"{report.acc_rejected} accelerometer samples rejected",
+                    file=sys.stderr,
+                )
+    items = list(series.values())
+    if len(items) == 1:
+        time, quats = items[0].time, items[0].quat[:, None, :]
+    else:
+        time = common_time_base(items)
+        quats = np.stack([resample_orientation(s, time) for s in items], axis=1)
+        print(
+            f"resampled {len(items)} sensors onto one time base ({len(time)} samples, "
+            f"{time[0]:.3f}..{time[-1]:.3f} s) by slerp",
+            file=sys.stderr,
+        )
+    labels = ["_".join(name.split()) for name in series]
+    write_table(args.output, time - time[0], labels, quats, name=args.path.stem)
+    print(f"wrote {args.output} ({len(time)} rows, sensors: {', '.join(labels)})", file=sys.stderr)
+    return EXIT_OK
+
+
+def _calibrate_mag(args: argparse.Namespace) -> int:
+    from mocapkit.imu.mag_calibration import fit_mag_calibration
+    from mocapkit.io.imu_csv import write_imu_csv
+    from mocapkit.io.imu_files import read_imu_recordings
+    from mocapkit.series import ImuRecording
+
+    recs = _select(read_imu_recordings(args.path), args.sensor, args.path)
+    if args.output is not None and len(recs) != 1:
+        raise ConfigError(
+            f"-o: {len(recs)} sensors in {args.path}; choose one with --sensor to write it"
+        )
+    results = {}
+    for name, rec in recs.items():
+        if rec.mag is None:
+            raise DataError(f"{name}: this recording has no magnetometer to calibrate")
+        cal = fit_mag_calibration(rec.mag, model=args.model, field_strength=args.field_strength)
+        raw = np.linalg.norm(rec.mag[rec.mag_valid], axis=1)
+        fixed = np.linalg.norm(cal.apply(rec.mag[rec.mag_valid]), axis=1)
+        results[name] = {
+            **cal.as_dict(),
+            "raw_norm_std": float(np.std(raw)),
+            "calibrated_norm_std": float(np.std(fixed)),
+        }
+        if args.output is not None:
+            meta = dict(rec.meta)
+            meta["mag_calibration"] = cal.as_dict()
+            out = ImuRecording(
+                rec.time, rec.gyr, rec.acc, cal.apply(rec.mag), name=rec.name, meta=meta
+            )
+            write_imu_csv(args.output, out)
+            print(f"wrote {args.output}", file=sys.stderr)
+    if args.json:
+        print_json({"sensors": results})
+        return EXIT_OK
+    for name, r in results.items():
+        print(f"{name}: {r['model']} fit on {r['n_samples']} samples")
+        print(f"  hard iron: {np.array2string(np.asarray(r['hard_iron']), precision=4)}")
+        soft = np.array2string(np.asarray(r["soft_iron"]), precision=4, prefix="  soft iron: ")
+        print(f"  soft iron: {soft}")
+        print(
+            f"  field norm std: {r['raw_norm_std']:.4g} raw -> {r['calibrated_norm_std']:.4g} "
+            f"calibrated (field strength {r['field_strength']:.4g})"
+        )
+    return EXIT_OK

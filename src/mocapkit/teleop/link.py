@@ -1,0 +1,114 @@
+"""Client side of the robot link: send end-effector commands, collect pose reports."""
+
+from __future__ import annotations
+
+import logging
+import socket
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from mocapkit._validate import FloatArray
+from mocapkit.robot.model import pose_matrix, pose_parts
+from mocapkit.teleop import protocol as proto
+
+log = logging.getLogger("mocapkit.teleop.link")
+
+
+class RobotLink:
+    """A UDP client of the robot server (loopback or LAN), non-blocking.
+
+    Attributes:
+        latest: the newest :class:`~mocapkit.teleop.protocol.Report` or None.
+        latest_t: ``time.monotonic()`` when it arrived [s].
+    """
+
+    def __init__(
+        self,
+        address: tuple[str, int],
+        on_report: Callable[[float, proto.Report], None] | None = None,
+    ) -> None:
+        self.address = address
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setblocking(False)
+        self.sock.connect(address)
+        self.seq = 0
+        self.latest: proto.Report | None = None
+        self.latest_t = -np.inf
+        self.on_report = on_report
+        self.malformed = 0
+        self.send_errors = 0
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def __enter__(self) -> RobotLink:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _send(self, data: bytes) -> bool:
+        try:
+            self.sock.send(data)
+            return True
+        except OSError as exc:  # ECONNREFUSED after an ICMP "port unreachable": server gone
+            self.send_errors += 1
+            log.debug("send to %s failed: %s", self.address, exc)
+            return False
+
+    def send_command(self, T_base_ee: Any) -> int:
+        """Send a pose (4, 4); returns its sequence number."""
+        self.seq += 1
+        pos, quat = pose_parts(T_base_ee)
+        self._send(proto.encode_command(self.seq, time.monotonic_ns(), pos, quat))
+        return self.seq
+
+    def send_hold(self) -> None:
+        self.seq += 1
+        self._send(proto.encode_hold(self.seq, time.monotonic_ns()))
+
+    def poll(self) -> int:
+        """Read every report waiting; returns how many arrived."""
+        n = 0
+        while True:
+            try:
+                data = self.sock.recv(4096)
+            except (BlockingIOError, InterruptedError):
+                return n
+            except OSError:  # ECONNREFUSED: nobody listens (yet)
+                return n
+            try:
+                msg = proto.decode(data)
+            except proto.LinkProtocolError as exc:
+                self.malformed += 1
+                log.warning("dropped report: %s", exc)
+                continue
+            if isinstance(msg, proto.Report):
+                t = time.monotonic()
+                self.latest, self.latest_t = msg, t
+                n += 1
+                if self.on_report is not None:
+                    self.on_report(t, msg)
+
+    def robot_pose(self) -> FloatArray | None:
+        """The latest reported pose T_base_ee (4, 4), or None."""
+        if self.latest is None:
+            return None
+        return pose_matrix(self.latest.pos, self.latest.quat)
+
+    def report_age(self, now: float | None = None) -> float:
+        """Seconds since the latest report (inf when none)."""
+        return (time.monotonic() if now is None else now) - self.latest_t
+
+    def wait_for_report(self, timeout_s: float = 5.0) -> bool:
+        """Send nothing, poll until a report arrives (the server reports to its last
+        sender, so send a HOLD first if it has never heard from us)."""
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            if self.poll():
+                return True
+            time.sleep(0.005)
+        return False
