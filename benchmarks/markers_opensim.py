@@ -382,14 +382,19 @@ NOTES = [
     "paper's own grouping tracks its four arm markers (rms over them ~1 mm) and leaves the "
     "legs undetermined (no output columns), as it should.",
     "- The joint-error bound (eq. 15-17) is a linearised pseudo-inverse of the marker "
-    "residuals: near singular configurations it can spike (walking2 OSC with 2 substeps: "
-    "1313 deg in one frame, 33 deg with 4 substeps); it is a diagnostic, not an accuracy.",
-    "- walking2.c3d: the subject walks through the volume, markers appear and vanish at the "
-    "edges; the OSC's marker RMS (10.9 mm) is twice IK's (5.0 mm) there because the simulated "
-    "body has velocity when markers reappear; IK has no memory.",
-    "- OpenSim's frame rate here (about 50 frames/s under load) is half its quiet-machine "
-    "figure (98-101 frames/s); ours drops similarly under load. The lead's quiet re-run decides "
-    "the 20x target (offline OSC >= 2000 frames/s).",
+    "errors of the last control step: near singular configurations it can spike (hundreds of "
+    "degrees in single frames of walking2 with 2 substeps, far less with 4); it is a "
+    "diagnostic of how well the markers pin the joints down, not an accuracy.",
+    "- walking2.c3d: the subject walks through the capture volume, markers appear and vanish "
+    "at its edges; there the OSC's marker RMS is about twice IK's, with its largest errors in "
+    "frames where a third of the markers are missing. Not investigated further.",
+    "- Figures (the paper's Fig. 2-4 for its own grouping, and Fig. 2 of the default grouping o"
+    "ver OpenSim's reference): `docs/figures/markers/`, made by `mocapkit markers report subjec"
+    "t01_walk1.trc --static subject01_static.trc --height-m 1.8034 --mass-kg 72.6 [--grouping p"
+    "aper | --reference OutputReference_subject01_walk1_ik.mot] -o DIR`.",
+    "- Frame rates on this shared machine vary by 2x between runs (OpenSim measured 53-125 "
+    "frames/s on this trial across our runs; its quiet-machine figure is 98-101); both sides "
+    "are timed in the same run. The lead's quiet re-run is the reference for the 20x target.",
 ]
 
 
