@@ -9,7 +9,7 @@ import pytest
 
 from mocapkit.body.calibration import CalibrationError
 from mocapkit.demo.operator_cycle import SENSORS, operator_cycle
-from mocapkit.demo.suit_chain import ChainConfig, SuitTeleopChain, best_filter
+from mocapkit.demo.suit_chain import PREFERRED_FILTERS, ChainConfig, SuitTeleopChain, best_filter
 from mocapkit.errors import ConfigError, DataError
 from mocapkit.geometry import quat_angle_between
 from mocapkit.imu.filters import available_filters
@@ -35,8 +35,9 @@ def test_operator_cycle_repeats_and_the_sensors_ride_their_segments() -> None:
 
 
 def test_best_filter_prefers_the_most_accurate_registered_one() -> None:
+    # the order is the measured accuracy on the simulated chain (suit_chain.PREFERRED_FILTERS)
     assert best_filter() in available_filters()
-    assert best_filter() == ("polaris" if "polaris" in available_filters() else "bachmann")
+    assert best_filter() == PREFERRED_FILTERS[0]
 
 
 @pytest.mark.slow

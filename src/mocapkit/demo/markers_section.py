@@ -13,7 +13,7 @@ from contextlib import ExitStack
 from dataclasses import dataclass, field
 from importlib.resources import as_file, files
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -75,7 +75,8 @@ def run_markers(out_dir: Path, progress: Progress = no_progress) -> dict[str, An
     outputs: dict[str, Path] = {}
     with ExitStack() as stack:
         walk, static = bundled_marker_files(stack)
-        for i, method in enumerate(("osc", "ik")):
+        methods: tuple[Literal["osc", "ik"], ...] = ("osc", "ik")
+        for i, method in enumerate(methods):
             progress("marker reconstruction", i, 2)
             result, _subject, _cleaning = run(
                 walk, static, None, None, None, ReconstructionOptions(method=method)
