@@ -1,13 +1,16 @@
-"""``mocapkit demo`` runs on the bundled recording (no ../shared needed)."""
+"""``mocapkit demo`` end to end on bundled data (no ../shared needed)."""
 
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
 from mocapkit.cli.main import main
 from mocapkit.io.broad import bundled_demo_trial
+from mocapkit.io.foxglove_mcap import read_foxglove_mcap
+from mocapkit.io.joint_angles_mot import read_joint_angles_mot
 
 
 def test_bundled_recording_is_a_real_broad_crop() -> None:
@@ -18,9 +21,53 @@ def test_bundled_recording_is_a_real_broad_crop() -> None:
     assert trial.movement.mean() > 0.8
 
 
-def test_demo_json(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["demo", "--json"]) == 0
+@pytest.mark.slow
+def test_demo_runs_everything_and_writes_the_report(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["demo", "--out", str(tmp_path), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
+    report = Path(out["report"])
+    assert report == tmp_path / "report.html"
+    html = report.read_text()
+    assert html.count("data:image/png;base64,") >= 5  # every plot embedded
+    for title in ("Teleoperation", "Marker reconstruction", "Orientation filters"):
+        assert title in html
+    t = out["teleop"]
+    assert t["transitions"][:2] == [
+        "disabled -> aligning: operator engaged",
+        "aligning -> engaged: aligned within 0 mm, 0.0 deg",
+    ]
+    # consumer-grade sensor noise through the whole chain: measured 7-9 mm; a broken
+    # calibration, frame or retargeting gives tens of centimetres
+    assert t["ee_rmse_mm"] < 25.0
+    assert t["robot_lag_ms"] > 0.0  # the server's 30 ms actuation latency at least
+    for coord in ("arm_flex_r", "arm_add_r", "arm_rot_r", "elbow_flex_r"):
+        # measured 0.3-1.6 deg; wrong axes or signs give tens of degrees
+        assert t["joint_rmse_deg"][coord] < 5.0, coord
+    # outputs: the body model's angles and a Foxglove MCAP
+    mot = read_joint_angles_mot(out["outputs"]["body_angles_mot"])
+    assert "elbow_flex_r" in mot.names
+    assert len(mot.time) > 500
+    fox = read_foxglove_mcap(out["outputs"]["foxglove_mcap"])
+    assert {"/body/segments", "/robot/ee_command", "/robot/ee_actual"} <= set(fox)
+    assert fox["/body/segments"][0][1] == "foxglove.FrameTransforms"
+    assert out["markers"]["status"] in ("ok", "unavailable")
+    rows = {(r["filter"], r["mode"]): r for r in out["imu"]["results"]}
+    assert 0.5 < rows[("miller", "9d")]["total_deg"] < 5.0
+
+
+def test_demo_imu_section_text(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--sections", "imu", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "orientation filters on BROAD trial 07 (crop)" in out
+    assert "miller     9d" in out
+    assert f"report: {tmp_path / 'report.html'}" in out
+
+
+def test_demo_imu_json_figures(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--sections", "imu", "--out", str(tmp_path), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)["imu"]
     assert out["rate_hz"] == pytest.approx(285.714, abs=1e-3)
     assert out["dip_deg"] == pytest.approx(69.0, abs=1.0)  # Berlin
     rows = {(r["filter"], r["mode"]): r for r in out["results"]}
@@ -33,8 +80,8 @@ def test_demo_json(capsys: pytest.CaptureFixture[str]) -> None:
             assert r["samples_per_s"] > 0
 
 
-def test_demo_text(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["demo"]) == 0
-    out = capsys.readouterr().out
-    assert "mocapkit demo: inertial orientation on a bundled real recording" in out
-    assert "miller     9d" in out
+def test_demo_bad_sections_is_a_usage_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["demo", "--sections", "imu,video", "--out", str(tmp_path)]) == 1
+    assert "sections: expected some of teleop, markers, imu" in capsys.readouterr().err

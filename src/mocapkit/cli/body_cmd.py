@@ -191,10 +191,31 @@ def _cmd_angles(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+_EXAMPLES = """\
+examples:
+  mocapkit body presets
+  mocapkit body angles ../shared/data/full-body-15-imu/full_body_example_data.mat \\
+      --preset full_body_15 -o angles.mot --bvh body.bvh --json
+  mocapkit body angles ../shared/data/opensense/walking_orientations.sto --preset opensense \\
+      -o walk.mot
+"""
+
+
 def register(subparsers: Any) -> None:
-    p = subparsers.add_parser("body", help="sensor orientations -> body joint angles")
+    raw = argparse.RawDescriptionHelpFormatter
+    p = subparsers.add_parser(
+        "body",
+        help="sensor orientations -> body joint angles",
+        epilog=_EXAMPLES,
+        formatter_class=raw,
+    )
     sub = p.add_subparsers(dest="body_command", metavar="SUBCOMMAND")
-    pr = sub.add_parser("presets", help="list the built-in sensor trees")
+    pr = sub.add_parser(
+        "presets",
+        help="list the built-in sensor trees",
+        epilog="example: mocapkit body presets --json",
+        formatter_class=raw,
+    )
     pr.add_argument("--json", action="store_true", help="one JSON object on stdout")
     pr.set_defaults(func=_cmd_presets)
 
@@ -205,6 +226,8 @@ def register(subparsers: Any) -> None:
         "quaternion .sto, x-IMU3 export directories and Xsens exports (device orientations; "
         "or --filter on the raw samples). Writes OpenSim .mot (degrees), BVH, segment "
         "orientations (.sto).",
+        epilog=_EXAMPLES,
+        formatter_class=raw,
     )
     a.add_argument("recording", help="recording file")
     a.add_argument(

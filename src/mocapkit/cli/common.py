@@ -51,3 +51,48 @@ def progress(
 
     console = Console(stderr=True)
     yield from track(items, description=description, total=total, console=console, transient=True)
+
+
+class StepProgress:
+    """Progress bars on stderr for a job made of named steps: ``bars(step, done, total)``
+    adds a bar the first time a step is seen and moves it (units are the step's own).
+    Use as a context manager; hidden when ``enabled`` is false or stderr is not a terminal.
+    """
+
+    def __init__(self, enabled: bool = True) -> None:
+        self._tasks: dict[str, Any] = {}
+        self._progress: Any = None
+        if enabled and sys.stderr.isatty():
+            from rich.console import Console
+            from rich.progress import (
+                BarColumn,
+                Progress,
+                TaskProgressColumn,
+                TextColumn,
+                TimeElapsedColumn,
+            )
+
+            self._progress = Progress(
+                TextColumn("{task.description:<24}"),
+                BarColumn(),
+                TaskProgressColumn(),
+                TimeElapsedColumn(),
+                console=Console(stderr=True),
+            )
+
+    def __call__(self, step: str, done: float, total: float) -> None:
+        if self._progress is None:
+            return
+        task = self._tasks.get(step)
+        if task is None:
+            task = self._tasks[step] = self._progress.add_task(step, total=total)
+        self._progress.update(task, completed=done, total=total)
+
+    def __enter__(self) -> StepProgress:
+        if self._progress is not None:
+            self._progress.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._progress is not None:
+            self._progress.stop()

@@ -32,8 +32,22 @@ def _filter_names() -> list[str]:
     return available_filters()
 
 
+_EXAMPLES = """\
+examples:
+  mocapkit imu evaluate ../shared/data/broad --filter miller --mode 9d --json
+  mocapkit imu run ../shared/data/ximu3-lower-body --filter bachmann -o lower_body.sto
+  mocapkit imu calibrate-mag recording.csv --json
+"""
+
+
 def register(sub: Any) -> None:
-    imu = sub.add_parser("imu", help="inertial orientation: evaluate, run, calibrate")
+    raw = argparse.RawDescriptionHelpFormatter
+    imu = sub.add_parser(
+        "imu",
+        help="inertial orientation: evaluate, run, calibrate",
+        epilog=_EXAMPLES,
+        formatter_class=raw,
+    )
     cmds = imu.add_subparsers(dest="imu_command", metavar="SUBCOMMAND")
     names = _filter_names()
 
@@ -45,6 +59,9 @@ def register(sub: Any) -> None:
         "total_deg is the heading-aligned total. samples_per_s is the single-thread "
         "throughput of the chosen backend (the numba fast path by default), compilation "
         "excluded.",
+        epilog="examples:\n  mocapkit imu evaluate ../shared/data/broad --filter miller --json\n"
+        "  mocapkit imu evaluate ../shared/data/broad --filter bachmann --mode 6d",
+        formatter_class=raw,
     )
     ev.add_argument("directory", type=Path, help="directory of BROAD .hdf5 trials")
     ev.add_argument("--filter", required=True, choices=names, dest="filter_name")
@@ -66,6 +83,10 @@ def register(sub: Any) -> None:
         "or a directory of sensors) or Xsens exports. Sensors with their own clocks are "
         "put on one uniform time base (slerp, never extrapolated) for the table. "
         "'--filter device' writes the orientation the device computed itself.",
+        epilog="examples:\n  mocapkit imu run ../shared/data/ximu3-lower-body --filter miller "
+        "-o lower_body.sto\n  mocapkit imu run ../shared/data/ximu3-lower-body --filter device "
+        "-o device.sto",
+        formatter_class=raw,
     )
     run.add_argument("path", type=Path)
     run.add_argument("--filter", required=True, choices=[*names, DEVICE], dest="filter_name")
@@ -81,6 +102,9 @@ def register(sub: Any) -> None:
         help="hard- and soft-iron magnetometer calibration (ellipsoid fit)",
         description="Fit the magnetometer readings of a rotation sequence. With -o the "
         "calibrated recording of one sensor is written as a mocapkit CSV.",
+        epilog="examples:\n  mocapkit imu calibrate-mag recording.csv --json\n"
+        "  mocapkit imu calibrate-mag export_dir --sensor 'Left Foot' -o left_foot_cal.csv",
+        formatter_class=raw,
     )
     cal.add_argument("path", type=Path)
     cal.add_argument("--sensor", action="append", default=[])

@@ -22,8 +22,10 @@ _COMMAND_MODULES: tuple[str, ...] = (
     "mocapkit.cli.body_cmd",
     "mocapkit.cli.demo_cmd",
     "mocapkit.cli.imu_cmd",
+    "mocapkit.cli.markers_cmd",
     "mocapkit.cli.suit_cmd",
     "mocapkit.cli.teleop_cmd",
+    "mocapkit.cli.viewer_cmd",
 )
 
 _EPILOG = """\

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from mocapkit.cli.common import EXIT_OK, print_json
+from mocapkit.cli.common import EXIT_OK, print_json, progress
 
 _EXAMPLES = """\
 examples:
@@ -169,7 +169,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     )
     server = ServerConfig(robot=args.robot, latency_s=args.latency_ms / 1e3)
     results = []
-    for shape in shapes:
+    for shape in progress(shapes, "teleop evaluate", total=len(shapes)):
         record = args.record
         if record is not None and len(shapes) > 1:
             record = record.with_name(f"{record.stem}-{shape}{record.suffix or '.mcap'}")

@@ -12,12 +12,18 @@ from mocapkit.series import JointAngleSeries
 _TRANSLATIONS = ("_tx", "_ty", "_tz")
 
 
+def _rotational(names: tuple[str, ...]) -> np.ndarray:
+    return np.array([not label.endswith(_TRANSLATIONS) for label in names], dtype=bool)
+
+
 def write_joint_angles_mot(path: str | Path, angles: JointAngleSeries) -> Path:
-    """Write rotational coordinates [rad] as degrees (``inDegrees=yes``), OpenSim's layout.
+    """Write rotational coordinates [rad] as degrees (``inDegrees=yes``), OpenSim's layout;
+    translations (``_tx``, ``_ty``, ``_tz``) stay metres, as OpenSim writes them.
     NaN (unknown) values are written as ``nan``, which OpenSim reads as missing."""
-    return write_table(
-        path, angles.time, list(angles.names), np.rad2deg(angles.values), name=angles.name
-    )
+    values = np.array(angles.values, dtype=float)
+    rot = _rotational(angles.names)
+    values[:, rot] = np.rad2deg(values[:, rot])
+    return write_table(path, angles.time, list(angles.names), values, name=angles.name)
 
 
 def read_joint_angles_mot(path: str | Path) -> JointAngleSeries:
@@ -27,6 +33,6 @@ def read_joint_angles_mot(path: str | Path) -> JointAngleSeries:
     table = read_table(path)
     values = table.data.copy()
     if table.in_degrees:
-        rot = np.array([not label.endswith(_TRANSLATIONS) for label in table.labels])
+        rot = _rotational(tuple(table.labels))
         values[:, rot] = np.deg2rad(values[:, rot])
     return JointAngleSeries(table.time, tuple(table.labels), values, name=Path(path).stem)

@@ -10,11 +10,15 @@ from mocapkit.imu.filters.base import (
     make_filter,
     register_filter,
 )
+from mocapkit.imu.filters.polaris import Polaris, PolarisParams, PolarisState
 
 __all__ = [
     "FilterParams",
     "FilterState",
     "OrientationFilter",
+    "Polaris",
+    "PolarisParams",
+    "PolarisState",
     "RunReport",
     "available_filters",
     "make_filter",

@@ -1,0 +1,588 @@
+"""``polaris``: the numba fast path.
+
+Exactly the arithmetic of :mod:`mocapkit.imu.filters.polaris_reference` (equations P1-P13
+there), written on scalars and one flat state vector (offsets ``S_*`` and coefficients
+``C_*`` from :mod:`mocapkit.imu.filters.polaris_params`) so that nothing is allocated per
+sample. Tests hold it to the reference to 1e-9 on real data.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from mocapkit.imu.filters.polaris_params import (
+    C_A1,
+    C_A2,
+    C_B0,
+    C_B1,
+    C_B2,
+    C_BIAS_NOISE_REST,
+    C_BIAS_PROCESS,
+    C_BLOCK,
+    C_FIELD_PROCESS,
+    C_FIELD_SIGMA_INIT,
+    C_HARD_IRON_INIT,
+    C_HARD_IRON_RESET,
+    C_HEADING_PROCESS,
+    C_HEADING_SIGMA_INIT,
+    C_LAG,
+    C_MAG_DELAY,
+    C_MAG_GATE,
+    C_MAG_NOISE,
+    C_MAG_RESET_TIME,
+    C_MAG_TIMING,
+    C_REST_ALPHA,
+    C_REST_MIN_TIME,
+    C_REST_TH_ACC,
+    C_REST_TH_GYR,
+    C_TILT_NOISE,
+    C_TILT_NOISE_REST,
+    C_TILT_PROCESS,
+    C_WARMUP,
+    HISTORY_LEN,
+    S_ACC_LP,
+    S_ACC_LP_STATE,
+    S_BIAS,
+    S_BLOCK_COUNT,
+    S_BLOCK_TIME,
+    S_DRIFT_G,
+    S_DRIFT_G_LP,
+    S_DRIFT_G_LP_STATE,
+    S_DRIFT_J,
+    S_DRIFT_J_LP,
+    S_DRIFT_J_LP_STATE,
+    S_DRIFT_JZ,
+    S_HISTORY,
+    S_HISTORY_POS,
+    S_MAG_COUNT,
+    S_MAG_DIST_TIME,
+    S_MAG_P,
+    S_MAG_R_SUM,
+    S_MAG_RATE2_SUM,
+    S_MAG_READY,
+    S_MAG_SCALE,
+    S_MAG_X,
+    S_MAG_Y_SUM,
+    S_Q_ACC,
+    S_Q_GYR,
+    S_REST_ACC_LP,
+    S_REST_COUNT,
+    S_REST_GYR_LP,
+    S_REST_GYR_SUM,
+    S_REST_TIME,
+    S_TILT_P,
+    S_WARMUP_COUNT,
+)
+
+
+@njit(cache=True, inline="always")
+def _qmul(
+    a0: float, a1: float, a2: float, a3: float, b0: float, b1: float, b2: float, b3: float
+) -> tuple[float, float, float, float]:
+    """Hamilton product (same formula as ``geometry.quat_mul``)."""
+    return (
+        a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
+        a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
+        a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1,
+        a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0,
+    )
+
+
+@njit(cache=True, inline="always")
+def _rotation_matrix(w: float, x: float, y: float, z: float, R: np.ndarray) -> None:
+    """``R = quat_to_matrix([w, x, y, z])`` (same formula as ``geometry``)."""
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    R[0, 0] = 1 - 2 * (yy + zz)
+    R[0, 1] = 2 * (xy - wz)
+    R[0, 2] = 2 * (xz + wy)
+    R[1, 0] = 2 * (xy + wz)
+    R[1, 1] = 1 - 2 * (xx + zz)
+    R[1, 2] = 2 * (yz - wx)
+    R[2, 0] = 2 * (xz - wy)
+    R[2, 1] = 2 * (yz + wx)
+    R[2, 2] = 1 - 2 * (xx + yy)
+
+
+@njit(cache=True, inline="always")
+def _lp_step(c: np.ndarray, value: float, s: np.ndarray, i: int) -> float:
+    """One Butterworth step of channel with memory ``s[i], s[i + 1]``; returns the output."""
+    y = c[C_B0] * value + s[i]
+    s[i] = c[C_B1] * value - c[C_A1] * y + s[i + 1]
+    s[i + 1] = c[C_B2] * value - c[C_A2] * y
+    return y
+
+
+@njit(cache=True, inline="always")
+def _lowpass(c: np.ndarray, value: float, s: np.ndarray, out: int, mem: int, warm: float) -> float:
+    """(P3)/(P4) low-pass of one channel: running mean while ``warm`` > 0 (seeding the
+    Butterworth memory ``s[mem:mem + 2]`` at its end), then the Butterworth."""
+    if warm > 0.0:
+        y = s[out] + (value - s[out]) / warm
+        if warm >= c[C_WARMUP]:
+            st2 = (c[C_B2] - c[C_A2]) * y
+            s[mem] = (c[C_B1] - c[C_A1]) * y + st2
+            s[mem + 1] = st2
+        return y
+    return _lp_step(c, value, s, mem)
+
+
+@njit(cache=True)
+def _tilt_update(c: np.ndarray, s: np.ndarray, P: np.ndarray, R: np.ndarray, v: np.ndarray) -> None:
+    """(P6)-(P10) on the flat state; ``P`` (5, 5), ``R`` (3, 3), ``v`` (15,) are scratch."""
+    T = s[S_BLOCK_TIME]
+    for i in range(25):
+        P[i // 5, i % 5] = s[S_TILT_P + i]
+    # (P6) P <- F P F^T + Q with F = [[I2, -Phi], [0, I3]], Phi = J (2x3).
+    j = S_DRIFT_J
+    for col in range(5):
+        r0 = s[j] * P[2, col] + s[j + 1] * P[3, col] + s[j + 2] * P[4, col]
+        r1 = s[j + 3] * P[2, col] + s[j + 4] * P[3, col] + s[j + 5] * P[4, col]
+        P[0, col] -= r0
+        P[1, col] -= r1
+    for row in range(5):
+        c0 = P[row, 2] * s[j] + P[row, 3] * s[j + 1] + P[row, 4] * s[j + 2]
+        c1 = P[row, 2] * s[j + 3] + P[row, 3] * s[j + 4] + P[row, 4] * s[j + 5]
+        P[row, 0] -= c0
+        P[row, 1] -= c1
+    q_tilt = c[C_TILT_PROCESS] * c[C_TILT_PROCESS] * T
+    q_bias = c[C_BIAS_PROCESS] * c[C_BIAS_PROCESS] * T
+    P[0, 0] += q_tilt
+    P[1, 1] += q_tilt
+    P[2, 2] += q_bias
+    P[3, 3] += q_bias
+    P[4, 4] += q_bias
+    x0 = x1 = x2 = x3 = x4 = 0.0
+    # (P9) rest: sequential scalar bias updates.
+    if s[S_REST_COUNT] >= c[C_BLOCK]:
+        r_rest = c[C_BIAS_NOISE_REST] * c[C_BIAS_NOISE_REST]
+        for i in range(3):
+            xi = x2 if i == 0 else (x3 if i == 1 else x4)
+            innovation = s[S_REST_GYR_SUM + i] / s[S_REST_COUNT] - (s[S_BIAS + i] + xi)
+            sv = P[2 + i, 2 + i] + r_rest
+            k0 = P[0, 2 + i] / sv
+            k1 = P[1, 2 + i] / sv
+            k2 = P[2, 2 + i] / sv
+            k3 = P[3, 2 + i] / sv
+            k4 = P[4, 2 + i] / sv
+            x0 += k0 * innovation
+            x1 += k1 * innovation
+            x2 += k2 * innovation
+            x3 += k3 * innovation
+            x4 += k4 * innovation
+            for r in range(5):
+                kr = (
+                    k0 if r == 0 else (k1 if r == 1 else (k2 if r == 2 else (k3 if r == 3 else k4)))
+                )
+                P[r, 0] -= kr * k0 * sv
+                P[r, 1] -= kr * k1 * sv
+                P[r, 2] -= kr * k2 * sv
+                P[r, 3] -= kr * k3 * sv
+                P[r, 4] -= kr * k4 * sv
+    # (P7) tilt measurement.
+    _rotation_matrix(s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3], R)
+    ax, ay, az = s[S_ACC_LP], s[S_ACC_LP + 1], s[S_ACC_LP + 2]
+    ex = R[0, 0] * ax + R[0, 1] * ay + R[0, 2] * az
+    ey = R[1, 0] * ax + R[1, 1] * ay + R[1, 2] * az
+    ez = R[2, 0] * ax + R[2, 1] * ay + R[2, 2] * az
+    norm = math.sqrt(ex * ex + ey * ey + ez * ez)
+    if norm > 1e-6:
+        nx, ny, nz = ex / norm, ey / norm, ez / norm
+        sin_angle = math.sqrt(nx * nx + ny * ny)
+        factor = math.atan2(sin_angle, nz) / sin_angle if sin_angle > 1e-12 else 1.0
+        z0 = ny * factor
+        z1 = -nx * factor
+        # (P8) lag model.
+        d0 = d1 = d2 = d3 = d4 = d5 = 0.0
+        if c[C_LAG] > 0.0:
+            d0 = s[S_DRIFT_J] - s[S_DRIFT_J_LP]
+            d1 = s[S_DRIFT_J + 1] - s[S_DRIFT_J_LP + 1]
+            d2 = s[S_DRIFT_J + 2] - s[S_DRIFT_J_LP + 2]
+            d3 = s[S_DRIFT_J + 3] - s[S_DRIFT_J_LP + 3]
+            d4 = s[S_DRIFT_J + 4] - s[S_DRIFT_J_LP + 4]
+            d5 = s[S_DRIFT_J + 5] - s[S_DRIFT_J_LP + 5]
+            bx, by, bz = s[S_BIAS], s[S_BIAS + 1], s[S_BIAS + 2]
+            z0 -= d0 * bx + d1 * by + d2 * bz - (s[S_DRIFT_G] - s[S_DRIFT_G_LP])
+            z1 -= d3 * bx + d4 * by + d5 * bz - (s[S_DRIFT_G + 1] - s[S_DRIFT_G_LP + 1])
+        at_rest = s[S_REST_TIME] >= c[C_REST_MIN_TIME]
+        sigma = c[C_TILT_NOISE_REST] if at_rest else c[C_TILT_NOISE]
+        i0 = z0 - (x0 + d0 * x2 + d1 * x3 + d2 * x4)
+        i1 = z1 - (x1 + d3 * x2 + d4 * x3 + d5 * x4)
+        # PHt (5x2) = P H^T with H = [[1, 0, d0, d1, d2], [0, 1, d3, d4, d5]].
+        ph0 = v[0:5]
+        ph1 = v[5:10]
+        for r in range(5):
+            ph0[r] = P[r, 0] + P[r, 2] * d0 + P[r, 3] * d1 + P[r, 4] * d2
+            ph1[r] = P[r, 1] + P[r, 2] * d3 + P[r, 3] * d4 + P[r, 4] * d5
+        s00 = ph0[0] + d0 * ph0[2] + d1 * ph0[3] + d2 * ph0[4] + sigma * sigma
+        s01 = ph1[0] + d0 * ph1[2] + d1 * ph1[3] + d2 * ph1[4]
+        s10 = ph0[1] + d3 * ph0[2] + d4 * ph0[3] + d5 * ph0[4]
+        s11 = ph1[1] + d3 * ph1[2] + d4 * ph1[3] + d5 * ph1[4] + sigma * sigma
+        det = s00 * s11 - s01 * s10
+        if det > 0.0:  # S is positive definite unless the state has broken down
+            v00, v01, v10, v11 = s11 / det, -s01 / det, -s10 / det, s00 / det
+            xs = v[10:15]
+            xs[0], xs[1], xs[2], xs[3], xs[4] = x0, x1, x2, x3, x4
+            for r in range(5):
+                k0 = ph0[r] * v00 + ph1[r] * v10
+                k1 = ph0[r] * v01 + ph1[r] * v11
+                xs[r] += k0 * i0 + k1 * i1
+                for col in range(5):
+                    P[r, col] -= k0 * ph0[col] + k1 * ph1[col]
+            x0, x1, x2, x3, x4 = xs[0], xs[1], xs[2], xs[3], xs[4]
+    # (P10) apply.
+    angle = math.sqrt(x0 * x0 + x1 * x1)
+    if angle > 1e-15:
+        sh = math.sin(0.5 * angle) / angle
+        w, qx, qy, qz = _qmul(
+            math.cos(0.5 * angle), sh * x0, sh * x1, 0.0,
+            s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3],
+        )  # fmt: skip
+    else:
+        w, qx, qy, qz = _qmul(
+            1.0, 0.0, 0.0, 0.0, s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3]
+        )
+    n = math.sqrt(w * w + qx * qx + qy * qy + qz * qz)
+    s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3] = w / n, qx / n, qy / n, qz / n
+    s[S_BIAS] += x2
+    s[S_BIAS + 1] += x3
+    s[S_BIAS + 2] += x4
+    # Symmetrise (see the reference): rounding asymmetry would otherwise grow.
+    for r in range(5):
+        for col in range(5):
+            s[S_TILT_P + 5 * r + col] = 0.5 * (P[r, col] + P[col, r])
+    # Rebase the drift integrals (see the reference).
+    b1m_a1 = c[C_B1] - c[C_A1]
+    b2m_a2 = c[C_B2] - c[C_A2]
+    for i in range(6):
+        v = s[S_DRIFT_J + i]
+        st2 = b2m_a2 * v
+        s[S_DRIFT_J_LP_STATE + 2 * i] -= b1m_a1 * v + st2
+        s[S_DRIFT_J_LP_STATE + 2 * i + 1] -= st2
+        s[S_DRIFT_J_LP + i] -= v
+        s[S_DRIFT_J + i] = 0.0
+    for i in range(2):
+        v = s[S_DRIFT_G + i]
+        st2 = b2m_a2 * v
+        s[S_DRIFT_G_LP_STATE + 2 * i] -= b1m_a1 * v + st2
+        s[S_DRIFT_G_LP_STATE + 2 * i + 1] -= st2
+        s[S_DRIFT_G_LP + i] -= v
+        s[S_DRIFT_G + i] = 0.0
+    s[S_REST_GYR_SUM] = 0.0
+    s[S_REST_GYR_SUM + 1] = 0.0
+    s[S_REST_GYR_SUM + 2] = 0.0
+    s[S_REST_COUNT] = 0.0
+
+
+@njit(cache=True)
+def _invert3(S: np.ndarray, out: np.ndarray) -> bool:
+    """``out = inv(S)`` for a 3x3 matrix by cofactors; False (out untouched) unless the
+    determinant is positive (S is a covariance)."""
+    c00 = S[1, 1] * S[2, 2] - S[1, 2] * S[2, 1]
+    c01 = S[1, 2] * S[2, 0] - S[1, 0] * S[2, 2]
+    c02 = S[1, 0] * S[2, 1] - S[1, 1] * S[2, 0]
+    det = S[0, 0] * c00 + S[0, 1] * c01 + S[0, 2] * c02
+    if not det > 0.0:
+        return False
+    out[0, 0] = c00 / det
+    out[0, 1] = (S[0, 2] * S[2, 1] - S[0, 1] * S[2, 2]) / det
+    out[0, 2] = (S[0, 1] * S[1, 2] - S[0, 2] * S[1, 1]) / det
+    out[1, 0] = c01 / det
+    out[1, 1] = (S[0, 0] * S[2, 2] - S[0, 2] * S[2, 0]) / det
+    out[1, 2] = (S[0, 2] * S[1, 0] - S[0, 0] * S[1, 2]) / det
+    out[2, 0] = c02 / det
+    out[2, 1] = (S[0, 1] * S[2, 0] - S[0, 0] * S[2, 1]) / det
+    out[2, 2] = (S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]) / det
+    return True
+
+
+@njit(cache=True)
+def _heading_update(
+    c: np.ndarray, s: np.ndarray, P: np.ndarray, H: np.ndarray, PHt: np.ndarray,
+    S: np.ndarray, Si: np.ndarray, nu: np.ndarray,
+) -> None:  # fmt: skip
+    """(P11)-(P13) on the flat state; the matrix arguments are scratch arrays."""
+    T = s[S_BLOCK_TIME]
+    for i in range(36):
+        P[i // 6, i % 6] = s[S_MAG_P + i]
+    q_bias = 0.0
+    for r in range(3):
+        for col in range(3):
+            q_bias += s[S_DRIFT_JZ + r] * s[S_TILT_P + 5 * (2 + r) + 2 + col] * s[S_DRIFT_JZ + col]
+    P[0, 0] += c[C_HEADING_PROCESS] * c[C_HEADING_PROCESS] * T + q_bias
+    P[1, 1] += c[C_FIELD_PROCESS] * c[C_FIELD_PROCESS] * T
+    P[2, 2] += c[C_FIELD_PROCESS] * c[C_FIELD_PROCESS] * T
+    count = s[S_MAG_COUNT]
+    x = S_MAG_X
+    if count > 0.0:
+        sd = math.sin(s[x])
+        cd = math.cos(s[x])
+        for i in range(3):
+            rm0 = s[S_MAG_R_SUM + 3 * i] / count
+            rm1 = s[S_MAG_R_SUM + 3 * i + 1] / count
+            rm2 = s[S_MAG_R_SUM + 3 * i + 2] / count
+            H[i, 3] = rm0
+            H[i, 4] = rm1
+            H[i, 5] = rm2
+            predicted = rm0 * s[x + 3] + rm1 * s[x + 4] + rm2 * s[x + 5]
+            if i == 0:
+                predicted = s[x + 1] * sd + predicted
+            elif i == 1:
+                predicted = s[x + 1] * cd + predicted
+            else:
+                predicted = s[x + 2] + predicted
+            nu[i] = s[S_MAG_Y_SUM + i] / count - predicted
+        H[0, 0], H[0, 1], H[0, 2] = s[x + 1] * cd, sd, 0.0
+        H[1, 0], H[1, 1], H[1, 2] = -s[x + 1] * sd, cd, 0.0
+        H[2, 0], H[2, 1], H[2, 2] = 0.0, 0.0, 1.0
+        for r in range(6):
+            for col in range(3):
+                acc = 0.0
+                for t in range(6):
+                    acc += P[r, t] * H[col, t]
+                PHt[r, col] = acc
+        r_mag = c[C_MAG_NOISE] * c[C_MAG_NOISE] + (
+            c[C_MAG_TIMING] * c[C_MAG_TIMING] * (s[S_MAG_RATE2_SUM] / count)
+        )
+        for r in range(3):
+            for col in range(3):
+                acc = 0.0
+                for t in range(6):
+                    acc += H[r, t] * PHt[t, col]
+                S[r, col] = acc + (r_mag if r == col else 0.0)
+        d2 = math.inf  # a broken-down state (S not positive definite) counts as rejected
+        if _invert3(S, Si):
+            d2 = 0.0
+            for r in range(3):
+                for col in range(3):
+                    d2 += nu[r] * Si[r, col] * nu[col]
+        gate = c[C_MAG_GATE]
+        if d2 <= gate * gate:
+            for r in range(6):
+                k0 = PHt[r, 0] * Si[0, 0] + PHt[r, 1] * Si[1, 0] + PHt[r, 2] * Si[2, 0]
+                k1 = PHt[r, 0] * Si[0, 1] + PHt[r, 1] * Si[1, 1] + PHt[r, 2] * Si[2, 1]
+                k2 = PHt[r, 0] * Si[0, 2] + PHt[r, 1] * Si[1, 2] + PHt[r, 2] * Si[2, 2]
+                s[x + r] += k0 * nu[0] + k1 * nu[1] + k2 * nu[2]
+                for col in range(6):
+                    P[r, col] -= k0 * PHt[col, 0] + k1 * PHt[col, 1] + k2 * PHt[col, 2]
+            s[S_MAG_DIST_TIME] = 0.0
+        else:
+            dist = s[S_MAG_DIST_TIME] + T
+            if dist >= c[C_MAG_RESET_TIME]:
+                for r in range(6):
+                    for col in range(3, 6):
+                        P[r, col] = 0.0
+                        P[col, r] = 0.0
+                reset = c[C_HARD_IRON_RESET] * c[C_HARD_IRON_RESET]
+                P[3, 3] = reset
+                P[4, 4] = reset
+                P[5, 5] = reset
+                dist = 0.0
+            s[S_MAG_DIST_TIME] = dist
+    s[x] = math.atan2(math.sin(s[x]), math.cos(s[x]))
+    for r in range(6):
+        for col in range(6):
+            s[S_MAG_P + 6 * r + col] = 0.5 * (P[r, col] + P[col, r])
+    for i in range(3):
+        s[S_MAG_Y_SUM + i] = 0.0
+    for i in range(9):
+        s[S_MAG_R_SUM + i] = 0.0
+    s[S_MAG_COUNT] = 0.0
+    s[S_MAG_RATE2_SUM] = 0.0
+
+
+@njit(cache=True)
+def _start_heading(c: np.ndarray, s: np.ndarray, R: np.ndarray, mx: float, my: float,
+                   mz: float) -> None:  # fmt: skip
+    """First magnetometer sample: scale, heading and field from it; hard iron 0."""
+    scale = math.sqrt(mx * mx + my * my + mz * mz)
+    fx = R[0, 0] * (mx / scale) + R[0, 1] * (my / scale) + R[0, 2] * (mz / scale)
+    fy = R[1, 0] * (mx / scale) + R[1, 1] * (my / scale) + R[1, 2] * (mz / scale)
+    fz = R[2, 0] * (mx / scale) + R[2, 1] * (my / scale) + R[2, 2] * (mz / scale)
+    s[S_MAG_SCALE] = scale
+    s[S_MAG_X] = math.atan2(fx, fy)
+    s[S_MAG_X + 1] = math.hypot(fx, fy)
+    s[S_MAG_X + 2] = fz
+    for i in range(3, 6):
+        s[S_MAG_X + i] = 0.0
+    for i in range(36):
+        s[S_MAG_P + i] = 0.0
+    s[S_MAG_P] = c[C_HEADING_SIGMA_INIT] * c[C_HEADING_SIGMA_INIT]
+    s[S_MAG_P + 7] = c[C_FIELD_SIGMA_INIT] * c[C_FIELD_SIGMA_INIT]
+    s[S_MAG_P + 14] = c[C_FIELD_SIGMA_INIT] * c[C_FIELD_SIGMA_INIT]
+    hi = c[C_HARD_IRON_INIT] * c[C_HARD_IRON_INIT]
+    s[S_MAG_P + 21] = hi
+    s[S_MAG_P + 28] = hi
+    s[S_MAG_P + 35] = hi
+    s[S_MAG_READY] = 1.0
+
+
+@njit(cache=True)
+def polaris_kernel(
+    c: np.ndarray,
+    s: np.ndarray,
+    gyr: np.ndarray,
+    acc: np.ndarray,
+    mag: np.ndarray,
+    dt: np.ndarray,
+    use_acc: np.ndarray,
+    use_mag: np.ndarray,
+    has_mag: bool,
+    out9: np.ndarray,
+    out6: np.ndarray,
+    aux: np.ndarray,
+) -> None:
+    """Process N samples from the started flat state ``s`` (in place); see
+    :func:`mocapkit.imu.filters.polaris_reference.run_reference` for the arguments."""
+    block = c[C_BLOCK]
+    delay = int(c[C_MAG_DELAY])
+    alpha = c[C_REST_ALPHA]
+    th_gyr2 = c[C_REST_TH_GYR] * c[C_REST_TH_GYR]
+    th_acc2 = c[C_REST_TH_ACC] * c[C_REST_TH_ACC]
+    want_aux = aux.shape[0] > 0
+    R = np.empty((3, 3))
+    Pt = np.empty((5, 5))
+    Pm = np.empty((6, 6))
+    Hm = np.empty((3, 6))
+    PHm = np.empty((6, 3))
+    Sm = np.empty((3, 3))
+    Sim = np.empty((3, 3))
+    nu = np.empty(3)
+    scratch = np.empty(15)
+    hc, hs = math.cos(0.5 * s[S_MAG_X]), math.sin(0.5 * s[S_MAG_X])  # Rz(delta), cached
+    for k in range(gyr.shape[0]):
+        step = dt[k]
+        gx, gy, gz = gyr[k, 0], gyr[k, 1], gyr[k, 2]
+        ax, ay, az = acc[k, 0], acc[k, 1], acc[k, 2]
+        # (P1) strapdown.
+        rx, ry, rz = gx - s[S_BIAS], gy - s[S_BIAS + 1], gz - s[S_BIAS + 2]
+        wx, wy, wz = rx * step, ry * step, rz * step
+        angle = math.sqrt(wx * wx + wy * wy + wz * wz)
+        if angle <= 1e-15:
+            dw, dx, dy, dz = 1.0, 0.0, 0.0, 0.0
+        else:
+            sh = math.sin(0.5 * angle) / angle
+            dw, dx, dy, dz = math.cos(0.5 * angle), sh * wx, sh * wy, sh * wz
+        w, x, y, z = _qmul(
+            s[S_Q_GYR], s[S_Q_GYR + 1], s[S_Q_GYR + 2], s[S_Q_GYR + 3], dw, dx, dy, dz
+        )
+        n = math.sqrt(w * w + x * x + y * y + z * z)
+        w, x, y, z = w / n, x / n, y / n, z / n
+        s[S_Q_GYR], s[S_Q_GYR + 1], s[S_Q_GYR + 2], s[S_Q_GYR + 3] = w, x, y, z
+        pos = int(s[S_HISTORY_POS])
+        h = S_HISTORY + 4 * pos
+        s[h], s[h + 1], s[h + 2], s[h + 3] = w, x, y, z
+        s[S_HISTORY_POS] = float((pos + 1) % HISTORY_LEN)
+        # (P2) rest detector.
+        dgx = gx - s[S_REST_GYR_LP]
+        dgy = gy - s[S_REST_GYR_LP + 1]
+        dgz = gz - s[S_REST_GYR_LP + 2]
+        dax = ax - s[S_REST_ACC_LP]
+        day = ay - s[S_REST_ACC_LP + 1]
+        daz = az - s[S_REST_ACC_LP + 2]
+        s[S_REST_GYR_LP] += alpha * dgx
+        s[S_REST_GYR_LP + 1] += alpha * dgy
+        s[S_REST_GYR_LP + 2] += alpha * dgz
+        s[S_REST_ACC_LP] += alpha * dax
+        s[S_REST_ACC_LP + 1] += alpha * day
+        s[S_REST_ACC_LP + 2] += alpha * daz
+        lgx, lgy, lgz = s[S_REST_GYR_LP], s[S_REST_GYR_LP + 1], s[S_REST_GYR_LP + 2]
+        still = (
+            use_acc[k]
+            and dgx * dgx + dgy * dgy + dgz * dgz < th_gyr2
+            and dax * dax + day * day + daz * daz < th_acc2
+            and lgx * lgx + lgy * lgy + lgz * lgz < th_gyr2
+        )
+        s[S_REST_TIME] = s[S_REST_TIME] + step if still else 0.0
+        if s[S_REST_TIME] >= c[C_REST_MIN_TIME]:
+            s[S_REST_GYR_SUM] += gx
+            s[S_REST_GYR_SUM + 1] += gy
+            s[S_REST_GYR_SUM + 2] += gz
+            s[S_REST_COUNT] += 1.0
+        # (P3) accelerometer in I, low-passed.
+        warm = 0.0
+        if s[S_WARMUP_COUNT] < c[C_WARMUP]:
+            warm = s[S_WARMUP_COUNT] + 1.0
+            s[S_WARMUP_COUNT] = warm
+        if use_acc[k]:
+            _rotation_matrix(w, x, y, z, R)
+            for i in range(3):
+                a_i = R[i, 0] * ax + R[i, 1] * ay + R[i, 2] * az
+                s[S_ACC_LP + i] = _lowpass(c, a_i, s, S_ACC_LP + i, S_ACC_LP_STATE + 2 * i, warm)
+        # (P4) drift integrals.
+        q0, q1, q2, q3 = _qmul(
+            s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3], w, x, y, z
+        )
+        _rotation_matrix(q0, q1, q2, q3, R)
+        bx, by, bz = s[S_BIAS], s[S_BIAS + 1], s[S_BIAS + 2]
+        for i in range(2):
+            for jj in range(3):
+                s[S_DRIFT_J + 3 * i + jj] += R[i, jj] * step
+            s[S_DRIFT_G + i] += (R[i, 0] * bx + R[i, 1] * by + R[i, 2] * bz) * step
+        for jj in range(3):
+            s[S_DRIFT_JZ + jj] += R[2, jj] * step
+        for i in range(6):
+            s[S_DRIFT_J_LP + i] = _lowpass(
+                c, s[S_DRIFT_J + i], s, S_DRIFT_J_LP + i, S_DRIFT_J_LP_STATE + 2 * i, warm
+            )
+        for i in range(2):
+            s[S_DRIFT_G_LP + i] = _lowpass(
+                c, s[S_DRIFT_G + i], s, S_DRIFT_G_LP + i, S_DRIFT_G_LP_STATE + 2 * i, warm
+            )
+        # (P5) magnetometer.
+        if has_mag and use_mag[k]:
+            if delay > 0:  # else R already holds R6 = R(q_acc * q_gyr), the same numbers
+                hp = S_HISTORY + 4 * ((pos - delay) % HISTORY_LEN)
+                m0, m1, m2, m3 = _qmul(
+                    s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3],
+                    s[hp], s[hp + 1], s[hp + 2], s[hp + 3],
+                )  # fmt: skip
+                _rotation_matrix(m0, m1, m2, m3, R)
+            mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
+            if s[S_MAG_READY] == 0.0:
+                _start_heading(c, s, R, mx, my, mz)
+                hc, hs = math.cos(0.5 * s[S_MAG_X]), math.sin(0.5 * s[S_MAG_X])
+            scale = s[S_MAG_SCALE]
+            ux, uy, uz = mx / scale, my / scale, mz / scale
+            for i in range(3):
+                s[S_MAG_Y_SUM + i] += R[i, 0] * ux + R[i, 1] * uy + R[i, 2] * uz
+                for jj in range(3):
+                    s[S_MAG_R_SUM + 3 * i + jj] += R[i, jj]
+            s[S_MAG_COUNT] += 1.0
+            s[S_MAG_RATE2_SUM] += rx * rx + ry * ry + rz * rz
+        s[S_BLOCK_COUNT] += 1.0
+        s[S_BLOCK_TIME] += step
+        if s[S_BLOCK_COUNT] >= block:
+            _tilt_update(c, s, Pt, R, scratch)
+            if has_mag and s[S_MAG_READY] != 0.0:
+                _heading_update(c, s, Pm, Hm, PHm, Sm, Sim, nu)
+                hc, hs = math.cos(0.5 * s[S_MAG_X]), math.sin(0.5 * s[S_MAG_X])
+            q0, q1, q2, q3 = _qmul(
+                s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3],
+                s[S_Q_GYR], s[S_Q_GYR + 1], s[S_Q_GYR + 2], s[S_Q_GYR + 3],
+            )  # fmt: skip
+            s[S_DRIFT_JZ] = 0.0
+            s[S_DRIFT_JZ + 1] = 0.0
+            s[S_DRIFT_JZ + 2] = 0.0
+            s[S_BLOCK_COUNT] = 0.0
+            s[S_BLOCK_TIME] = 0.0
+        # q6 = q_acc * q_gyr: from (P4), or recomputed above after a block update.
+        out6[k, 0], out6[k, 1], out6[k, 2], out6[k, 3] = q0, q1, q2, q3
+        if s[S_MAG_READY] != 0.0:
+            h0, h1, h2, h3 = _qmul(hc, 0.0, 0.0, hs, q0, q1, q2, q3)
+            out9[k, 0], out9[k, 1], out9[k, 2], out9[k, 3] = h0, h1, h2, h3
+        else:
+            out9[k, 0], out9[k, 1], out9[k, 2], out9[k, 3] = q0, q1, q2, q3
+        if want_aux:
+            aux[k, 0] = s[S_TILT_P]
+            aux[k, 1] = s[S_TILT_P + 1]
+            aux[k, 2] = s[S_TILT_P + 6]
+            aux[k, 3] = s[S_MAG_P]
+            aux[k, 4] = s[S_BIAS]
+            aux[k, 5] = s[S_BIAS + 1]
+            aux[k, 6] = s[S_BIAS + 2]
+            aux[k, 7] = (s[S_TILT_P + 12] + s[S_TILT_P + 18] + s[S_TILT_P + 24]) / 3.0

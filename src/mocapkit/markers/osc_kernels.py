@@ -1,0 +1,268 @@
+"""Numba kernels of direct marker control: one capture frame and a whole trial. The
+readable reference is :mod:`mocapkit.markers.osc_reference`.
+
+Between two capture frames the simulation runs ``n_sub`` steps of dt; every step:
+
+1. rigid-body terms at (q, v): A, b + g, marker positions P, Jacobians J and J̇v
+   (:mod:`mocapkit.markers.rigid_fast`, checked against Pinocchio);
+2. per marker the commanded acceleration ``F* = ẍ_d + Kd (ẋ_d − J v) + Kp (x_d − P)`` on
+   the target trajectory ``x_{f-1} + ẋ s + ẍ s² / 2`` (central differences at t_{f-1},
+   which reach x_f exactly at s = T);
+3. levels: first the locked coordinates and the joints at a limit (rows of the identity),
+   then the marker subsets in priority order (markers not visible dropped), then the
+   posture; Γ from :func:`mocapkit.markers.prioritized.prioritized_torque` (eq. 6-13);
+4. ``A q̈ + b + g = Γ`` integrated by semi-implicit Euler, angles kept within limits.
+
+Gains: with the model's own dynamics compensated, each task row is ẍ = F*; with
+semi-implicit Euler, ``Kd = 1/dt`` and ``Kp = κ/dt²`` shrink the error by (1 − κ) per step
+(the other pole is 0); :class:`~mocapkit.markers.osc.OSCParams` sets κ. A state that runs
+away (|v| > 1e4) ends the frame with NaN outputs, which the callers report.
+
+The frame's outputs are the state at t_f, the tracked markers P(q(t_f)), their errors to
+the targets at t_f and the bound Δq = Jbar_⊗ Δx_⊗ (eq. 15) of the last step's marker errors.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from mocapkit.markers.prioritized import prioritized_torque
+from mocapkit.markers.rigid_fast import (
+    dynamics_terms,
+    forward_kinematics,
+    integrate,
+    marker_bias,
+    marker_kinematics,
+)
+
+FloatArray = np.ndarray  # numba kernels: mypy does not track their dtypes
+
+
+@njit(cache=True)
+def _lock_rows(
+    q: FloatArray,
+    v: FloatArray,
+    lock_dof: np.ndarray,
+    lock_value: FloatArray,
+    lower: FloatArray,
+    upper: FloatArray,
+) -> tuple[np.ndarray, FloatArray]:
+    """q indices held this frame and their targets: coordinate tasks, then joints at limits."""
+    rows = np.empty(q.shape[0], dtype=np.int64)
+    target = np.empty(q.shape[0])
+    n = 0
+    for c in range(lock_dof.shape[0]):
+        rows[n] = lock_dof[c]
+        target[n] = lock_value[c]
+        n += 1
+    for iq in range(7, q.shape[0]):
+        held = False
+        for c in range(lock_dof.shape[0]):
+            if lock_dof[c] == iq:
+                held = True
+        if held:
+            continue
+        if q[iq] <= lower[iq] + 1e-9 and v[iq - 1] <= 0.0:
+            rows[n] = iq
+            target[n] = lower[iq]
+            n += 1
+        elif q[iq] >= upper[iq] - 1e-9 and v[iq - 1] >= 0.0:
+            rows[n] = iq
+            target[n] = upper[iq]
+            n += 1
+    return rows[:n], target[:n]
+
+
+@njit(cache=True)
+def osc_frame(
+    parent: np.ndarray,
+    R0: FloatArray,
+    p0: FloatArray,
+    axis: FloatArray,
+    mass: FloatArray,
+    com: FloatArray,
+    inertia: FloatArray,
+    gravity: FloatArray,
+    marker_joint: np.ndarray,
+    marker_offset: FloatArray,
+    q: FloatArray,
+    v: FloatArray,
+    x0: FloatArray,
+    x1: FloatArray,
+    xd0: FloatArray,
+    xdd0: FloatArray,
+    row_weight: FloatArray,
+    level_ptr: np.ndarray,
+    level_markers: np.ndarray,
+    lock_dof: np.ndarray,
+    lock_value: FloatArray,
+    lower: FloatArray,
+    upper: FloatArray,
+    q_posture: FloatArray,
+    gains: FloatArray,
+    dt_frame: float,
+    n_sub: int,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Advance the simulated body from t_{f-1} to t_f in ``n_sub`` control + simulation steps.
+
+    Args:
+        q, v: state at t_{f-1}.
+        x0: (M, 3) marker targets at t_{f-1} (NaN: not visible); x1: at t_f.
+        xd0, xdd0: (M, 3) target velocity and acceleration at t_{f-1}; within the frame the
+            target follows ``x0 + xd0 s + xdd0 s² / 2`` (s = time since t_{f-1}).
+        row_weight: (M,) weight of each marker within its level (rows scaled by √w).
+        level_ptr, level_markers: priority levels of marker indices (CSR layout).
+        lock_dof, lock_value: q indices held at values (coordinate tasks).
+        lower, upper: (nq,) limits (root entries infinite).
+        q_posture: (nq,) posture target.
+        gains: [kp, kd, kp_lock, kd_lock, kp_posture, kd_posture, damping] per substep.
+
+    Returns:
+        q, v at t_f; P (M, 3) tracked markers; Δq (nv,) the bound of eq. 15; e (M,) marker
+        error norms to x1 (NaN: not visible at t_f). All NaN if the simulation diverged.
+    """
+    nv = v.shape[0]
+    M = marker_joint.shape[0]
+    kp, kd, kpl, kdl, kpp, kdp = gains[0], gains[1], gains[2], gains[3], gains[4], gains[5]
+    dt = dt_frame / n_sub
+    tracked = np.zeros(M, dtype=np.bool_)
+    for m in range(M):
+        tracked[m] = np.isfinite(x0[m, 0]) or np.isfinite(x1[m, 0])
+    n_marker_rows = 0
+    for k in range(level_markers.shape[0]):
+        if tracked[level_markers[k]]:
+            n_marker_rows += 3
+    n_levels = level_ptr.shape[0] - 1
+    dq = np.zeros(nv)
+    for j in range(n_sub):
+        s_now = j * dt
+        R, t, S, V, Ab, Amat, h = dynamics_terms(
+            parent, R0, p0, axis, mass, com, inertia, gravity, q, v
+        )
+        P, J = marker_kinematics(parent, R, t, S, marker_joint, marker_offset)
+        B = marker_bias(R, t, V, Ab, marker_joint, marker_offset)
+        if not (np.isfinite(Amat).all() and np.isfinite(h).all() and np.isfinite(J).all()):
+            nan = np.full(M, np.nan)
+            return q * np.nan, v * np.nan, np.full((M, 3), np.nan), np.full(nv, np.nan), nan
+        LA = np.linalg.cholesky(Amat)
+        lock_rows, lock_target = _lock_rows(q, v, lock_dof, lock_value, lower, upper)
+        n_lock = lock_rows.shape[0]
+        n_rows = n_lock + n_marker_rows
+        Jall = np.zeros((n_rows, nv))
+        acc = np.zeros(n_rows)
+        bias = np.zeros(n_rows)
+        dx = np.zeros(n_rows)
+        ptr = np.zeros(n_levels + 2, dtype=np.int64)
+        for c in range(n_lock):
+            iq = lock_rows[c]
+            Jall[c, iq - 1] = 1.0
+            acc[c] = kpl * (lock_target[c] - q[iq]) - kdl * v[iq - 1]
+        ptr[1] = n_lock
+        r = n_lock
+        for lv in range(n_levels):
+            for k in range(level_ptr[lv], level_ptr[lv + 1]):
+                m = level_markers[k]
+                if not tracked[m]:
+                    continue
+                if np.isfinite(x0[m, 0]):
+                    # the target at the end of this substep (error measured where we go)
+                    xdes = x0[m] + xd0[m] * s_now + 0.5 * xdd0[m] * s_now * s_now
+                    vdes = xd0[m] + xdd0[m] * s_now
+                    ades = xdd0[m]
+                else:
+                    xdes, vdes, ades = x1[m], np.zeros(3), np.zeros(3)
+                Jv = J[m] @ v
+                sw = np.sqrt(row_weight[m])
+                for c in range(3):
+                    Jall[r + c] = sw * J[m, c]
+                    acc[r + c] = sw * (ades[c] + kd * (vdes[c] - Jv[c]) + kp * (xdes[c] - P[m, c]))
+                    bias[r + c] = sw * B[m, c]
+                    dx[r + c] = sw * (xdes[c] - P[m, c])
+                r += 3
+            ptr[lv + 2] = r
+        a_post = -kdp * v
+        for iq in range(7, q.shape[0]):
+            a_post[iq - 1] += kpp * (q_posture[iq] - q[iq])
+        # the bound (eq. 15) of the last step's marker errors; lock rows have no error
+        _Gamma, qdd, dq = prioritized_torque(
+            Amat, LA, h, Jall, acc, bias, ptr, a_post, dx, j == n_sub - 1, gains[6]
+        )
+        v = v + qdd * dt
+        q = integrate(q, v * dt)
+        for iq in range(7, q.shape[0]):
+            if q[iq] < lower[iq]:
+                q[iq] = lower[iq]
+                v[iq - 1] = max(v[iq - 1], 0.0)
+            elif q[iq] > upper[iq]:
+                q[iq] = upper[iq]
+                v[iq - 1] = min(v[iq - 1], 0.0)
+        if not (np.isfinite(q).all() and np.isfinite(v).all() and np.abs(v).max() < 1e4):
+            nan = np.full(M, np.nan)
+            return q * np.nan, v * np.nan, np.full((M, 3), np.nan), np.full(nv, np.nan), nan
+    R, t, S = forward_kinematics(parent, R0, p0, axis, q)
+    P, J = marker_kinematics(parent, R, t, S, marker_joint, marker_offset)
+    err = np.full(M, np.nan)
+    for m in range(M):
+        if np.isfinite(x1[m, 0]):
+            d = x1[m] - P[m]
+            err[m] = np.sqrt(d @ d)
+    return q, v, P, dq, err
+
+
+@njit(cache=True)
+def osc_trial(
+    parent: np.ndarray,
+    R0: FloatArray,
+    p0: FloatArray,
+    axis: FloatArray,
+    mass: FloatArray,
+    com: FloatArray,
+    inertia: FloatArray,
+    gravity: FloatArray,
+    marker_joint: np.ndarray,
+    marker_offset: FloatArray,
+    q_init: FloatArray,
+    X: FloatArray,
+    Xd: FloatArray,
+    Xdd: FloatArray,
+    row_weight: FloatArray,
+    level_ptr: np.ndarray,
+    level_markers: np.ndarray,
+    lock_dof: np.ndarray,
+    lock_value: FloatArray,
+    lower: FloatArray,
+    upper: FloatArray,
+    q_posture: FloatArray,
+    gains: FloatArray,
+    dt_frame: float,
+    n_sub: int,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Run :func:`osc_frame` over a whole trial X (N, M, 3) with target velocities Xd and
+    accelerations Xdd (N, M, 3). Frame 0 starts from ``q_init`` at rest, holding frame 0.
+    Returns Q (N, nq), P (N, M, 3), ΔQ (N, nv), E (N, M).
+    """
+    N, M = X.shape[0], X.shape[1]
+    nq = q_init.shape[0]
+    nv = nq - 1
+    Q = np.empty((N, nq))
+    P = np.empty((N, M, 3))
+    DQ = np.empty((N, nv))
+    E = np.empty((N, M))
+    q = q_init.copy()
+    v = np.zeros(nv)
+    for f in range(N):
+        if f == 0:
+            x0, xd0, xdd0 = X[0], np.zeros((M, 3)), np.zeros((M, 3))
+        else:
+            x0, xd0, xdd0 = X[f - 1], Xd[f - 1], Xdd[f - 1]
+        q, v, Pf, dq, e = osc_frame(
+            parent, R0, p0, axis, mass, com, inertia, gravity, marker_joint, marker_offset,
+            q, v, x0, X[f], xd0, xdd0, row_weight, level_ptr, level_markers, lock_dof,
+            lock_value, lower, upper, q_posture, gains, dt_frame, n_sub,
+        )  # fmt: skip
+        Q[f] = q
+        P[f] = Pf
+        DQ[f] = dq
+        E[f] = e
+    return Q, P, DQ, E

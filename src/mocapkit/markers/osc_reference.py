@@ -1,0 +1,178 @@
+"""Readable reference of direct marker control: Pinocchio's rigid-body algorithms and the
+paper's formulas written out in joint space (eq. 6-13), no numba.
+
+The fast kernels (:mod:`mocapkit.markers.osc_kernels`) work in the coordinates
+``y = L_Aᵀ q̈``; this module uses ``Λ``, ``Jbar`` and ``N`` as the paper writes them, and
+the tests check that both give the same frames.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from mocapkit._validate import FloatArray
+from mocapkit.body.human_model import HumanModel
+from mocapkit.markers.kinematics import MarkerKinematics
+from mocapkit.markers.prioritized import RANK_TOLERANCE
+
+if TYPE_CHECKING:  # pragma: no cover
+    from mocapkit.markers.osc import ControlProblem
+
+
+def prioritized_torque_reference(
+    Amat: FloatArray,
+    h: FloatArray,
+    J: FloatArray,
+    acc: FloatArray,
+    bias: FloatArray,
+    level_ptr: Sequence[int],
+    posture_acc: FloatArray,
+    damping: float,
+) -> tuple[FloatArray, FloatArray]:
+    """Γ (eq. 11) and Jbar_⊗ (nv, R) with the damped task-space inertia of each level
+    ``Λ = (J_k|p A⁻¹ J_k|pᵀ + λ² I)⁻¹`` and exact null-space projectors (see
+    :func:`mocapkit.markers.prioritized.prioritized_torque` for λ and the last level)."""
+    nv = Amat.shape[0]
+    Ainv = np.linalg.inv(Amat)
+    N = np.eye(nv)
+    Gamma = np.zeros(nv)
+    Jbar_all = np.zeros((nv, J.shape[0]))
+    levels = [(level_ptr[k], level_ptr[k + 1]) for k in range(len(level_ptr) - 1)]
+    levels = [(a, b) for a, b in levels if b > a]
+    for i, (a, b) in enumerate(levels):
+        Jk = J[a:b]
+        scale = float(np.trace(Jk @ Ainv @ Jk.T))
+        if scale <= 0:
+            continue
+        lam2 = damping * scale / (b - a) + 1e-10 * scale
+        Jp = Jk @ N
+        X = Jp @ Ainv @ Jp.T
+        w, U = np.linalg.eigh(X)
+        keep = w > RANK_TOLERANCE * scale
+        Uk, wk = U[:, keep], w[keep]
+        Lam = Uk @ np.diag(1.0 / (wk + lam2)) @ Uk.T  # damped, on the range of X
+        F = Lam @ (acc[a:b] - bias[a:b] + Jk @ Ainv @ (h - Gamma))
+        Gamma = Gamma + Jp.T @ F
+        Jbar = Ainv @ Jp.T @ Lam
+        Jbar_all[:, a:b] = Jbar
+        if i == len(levels) - 1:
+            Lam_full = np.linalg.inv(X + lam2 * np.eye(b - a))
+            N = N - Ainv @ Jp.T @ Lam_full @ Jp  # damped projector below the last level
+        else:
+            exact = Uk @ np.diag(1.0 / wk) @ Uk.T
+            N = N - Ainv @ Jp.T @ exact @ Jp
+    Gamma = Gamma + N.T @ (Amat @ posture_acc + h - Gamma)
+    return Gamma, Jbar_all
+
+
+class ReferenceStepper:
+    """One capture frame of direct marker control on Pinocchio (same contract as
+    :func:`mocapkit.markers.osc_kernels.osc_frame`)."""
+
+    def __init__(self, human: HumanModel, names: Sequence[str], problem: ControlProblem) -> None:
+        import pinocchio as pin
+
+        self._pin = pin
+        self.human = human
+        self.kin = MarkerKinematics(human, names)
+        self.model = human.model
+        self.data = self.model.createData()
+
+    def _lock_rows(
+        self, q: FloatArray, v: FloatArray, lock_dof: Any, lock_value: Any, lo: Any, hi: Any
+    ) -> tuple[list[int], list[float]]:
+        rows, target = list(map(int, lock_dof)), list(map(float, lock_value))
+        for iq in range(7, q.shape[0]):
+            if iq in rows:
+                continue
+            if q[iq] <= lo[iq] + 1e-9 and v[iq - 1] <= 0.0:
+                rows.append(iq)
+                target.append(float(lo[iq]))
+            elif q[iq] >= hi[iq] - 1e-9 and v[iq - 1] >= 0.0:
+                rows.append(iq)
+                target.append(float(hi[iq]))
+        return rows, target
+
+    def frame(
+        self,
+        q: FloatArray,
+        v: FloatArray,
+        x0: FloatArray,
+        x1: FloatArray,
+        xd0: FloatArray,
+        xdd0: FloatArray,
+        row_weight: FloatArray,
+        level_ptr: Any,
+        level_markers: Any,
+        lock_dof: Any,
+        lock_value: Any,
+        lower: FloatArray,
+        upper: FloatArray,
+        q_posture: FloatArray,
+        gains: FloatArray,
+        dt_frame: float,
+        n_sub: int,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        pin, model, data = self._pin, self.model, self.data
+        kp, kd, kpl, kdl, kpp, kdp, damping = (float(g) for g in gains)
+        nv, M = model.nv, len(x1)
+        dt = dt_frame / n_sub
+        tracked = np.isfinite(x0[:, 0]) | np.isfinite(x1[:, 0])
+        order = [int(m) for m in level_markers if tracked[m]]
+        q, v = q.copy(), v.copy()
+        dq = np.zeros(nv)
+        for j in range(n_sub):
+            s = j * dt
+            Amat = pin.crba(model, data, q).copy()
+            h = pin.nonLinearEffects(model, data, q, v).copy()
+            P, J = self.kin.reference_positions_jacobians(q)
+            B = self.kin.reference_bias(q, v)
+            rows, target = self._lock_rows(q, v, lock_dof, lock_value, lower, upper)
+            J_rows, acc, bias, ptr, dx = [], [], [], [0, len(rows)], []
+            for iq, tgt in zip(rows, target, strict=True):
+                e = np.zeros(nv)
+                e[iq - 1] = 1.0
+                J_rows.append(e)
+                acc.append(kpl * (tgt - q[iq]) - kdl * v[iq - 1])
+                bias.append(0.0)
+            for lv in range(len(level_ptr) - 1):
+                for k in range(level_ptr[lv], level_ptr[lv + 1]):
+                    m = int(level_markers[k])
+                    if not tracked[m]:
+                        continue
+                    if np.isfinite(x0[m, 0]):
+                        xdes = x0[m] + xd0[m] * s + 0.5 * xdd0[m] * s * s
+                        vdes, ades = xd0[m] + xdd0[m] * s, xdd0[m]
+                    else:
+                        xdes, vdes, ades = x1[m], np.zeros(3), np.zeros(3)
+                    sw = np.sqrt(row_weight[m])
+                    a_task = ades + kd * (vdes - J[m] @ v) + kp * (xdes - P[m])
+                    J_rows += list(sw * J[m])
+                    acc += list(sw * a_task)
+                    bias += list(sw * B[m])
+                    dx += list(sw * (xdes - P[m]))
+                ptr.append(len(acc))
+            a_post = -kdp * v
+            a_post[6:] += kpp * (q_posture[7:] - q[7:])
+            Gamma, Jbar = prioritized_torque_reference(
+                Amat, h, np.array(J_rows).reshape(-1, nv), np.array(acc), np.array(bias),
+                ptr, a_post, damping,
+            )  # fmt: skip
+            if dx:
+                dq = Jbar[:, len(rows) :] @ np.array(dx)  # eq. 15, the last step's errors
+            qdd = np.linalg.solve(Amat, Gamma - h)
+            v = v + qdd * dt
+            q = np.asarray(pin.integrate(model, q, v * dt))
+            low, high = q[7:] < lower[7:], q[7:] > upper[7:]
+            q[7:] = np.clip(q[7:], lower[7:], upper[7:])
+            v[6:][low] = np.maximum(v[6:][low], 0.0)
+            v[6:][high] = np.minimum(v[6:][high], 0.0)
+        P = self.kin.positions(q)
+        err = np.full(M, np.nan)
+        vis = np.isfinite(x1[:, 0])
+        err[vis] = np.linalg.norm(x1[vis] - P[vis], axis=1)
+        del order
+        return q, v, P, dq, err

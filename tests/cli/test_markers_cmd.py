@@ -1,0 +1,72 @@
+"""``mocapkit markers`` in process: the JSON contract, the report, inspect, bad arguments."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from mocapkit.cli.main import main
+
+
+@pytest.fixture
+def gait(shared_data: Path) -> Path:
+    return shared_data / "opensim" / "gait2392"
+
+
+def test_reconstruct_json(gait: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "walk.mot"
+    code = main([
+        "markers", "reconstruct", str(gait / "subject01_walk1.trc"), "--static",
+        str(gait / "subject01_static.trc"), "--method", "ik", "--height-m", "1.8034",
+        "--mass-kg", "72.6", "--end-s", "0.5", "-o", str(out), "--json",
+    ])  # fmt: skip
+    assert code == 0
+    figures = json.loads(capsys.readouterr().out)
+    assert list(figures) == [
+        "frames",
+        "fps",
+        "marker_rms_mm",
+        "marker_max_mm",
+        "joint_error_bound_deg_max",
+    ]
+    assert figures["frames"] == 31
+    assert 0 < figures["marker_rms_mm"] < 30
+    assert out.read_text().startswith("mocapkit_markers")
+
+
+def test_report_and_inspect(gait: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = main([
+        "markers", "report", str(gait / "subject01_walk1.trc"), "--static",
+        str(gait / "subject01_static.trc"), "--grouping", "paper", "--end-s", "0.5",
+        "--reference", str(gait / "reference" / "OutputReference_subject01_walk1_ik.mot"),
+        "-o", str(tmp_path / "rep"), "--json",
+    ])  # fmt: skip
+    assert code == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["levels"] == [["R.Acromium", "L.Wrist.Lat"], ["L.Elbow", "R.Wrist.Lat"]]
+    assert (tmp_path / "rep" / "fig3_markers.png").is_file()
+    assert main(["markers", "inspect", str(gait / "subject01_walk1.trc"), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["frames"] == 151
+    assert info["declared_units"] == "mm"
+
+
+def test_bad_arguments(gait: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    trial = str(gait / "subject01_walk1.trc")
+    assert main(["markers", "reconstruct", trial, "-o", str(tmp_path / "x.txt")]) == 1
+    assert "expected a .mot or .csv file name" in capsys.readouterr().err
+    assert (
+        main(
+            ["markers", "reconstruct", trial, "--markerset", "nope", "-o", str(tmp_path / "x.mot")]
+        )
+        == 1
+    )
+    assert "marker set 'nope': not a preset" in capsys.readouterr().err
+    assert (
+        main(["markers", "reconstruct", str(tmp_path / "none.trc"), "-o", str(tmp_path / "x.mot")])
+        == 1
+    )
+    assert "no such marker file" in capsys.readouterr().err
+    assert main(["markers", "reconstruct", trial]) == 2  # -o is required
