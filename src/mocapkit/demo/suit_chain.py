@@ -446,7 +446,10 @@ class SuitTeleopChain:
         if self._error is not None:
             raise MocapkitError(f"the pipeline thread failed: {self._error}") from self._error
         with self._snap_lock:
-            return self._snapshot
+            snap = self._snapshot
+        # the operator-facing message changes on commands: the current one, not the one
+        # of the last publication
+        return snap if snap.message == self._message else replace(snap, message=self._message)
 
     def _safety(self) -> str:
         parts = [self.session.fault] if self.session.fault else []
