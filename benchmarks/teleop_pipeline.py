@@ -1,89 +1,148 @@
-"""Host-side pipeline time, packet -> robot command, and the six-shape evaluation.
+"""Host-side pipeline time (packet -> robot command) and the six-shape evaluation, through
+the real chain.
 
-    python -m benchmarks.teleop_pipeline            # pipeline timing + six shapes
-    python -m benchmarks.teleop_pipeline --no-shapes
+    python -m benchmarks.teleop_pipeline                  # everything below (~5 min)
+    python -m benchmarks.teleop_pipeline --only pipeline  # the 15-sensor timing only
+    python -m benchmarks.teleop_pipeline --only shapes --filter bachmann
 
-Pipeline: 15 sensors at 100 Hz (one packet per hub round carrying all 15 orientations);
-the arm's two sensors drive Robonaut 2 (eq. 16 retargeting, intermediate model FK,
-session, command encoded and sent on a real loopback UDP socket to a listener).
+1. ``pipeline``: 15 sensors at 100 Hz (the ``full_body_15`` tree, the paper's maximum),
+   end to end on real sockets: the simulated suit in its own process sends one bundle per
+   hub round (``--fusion node``) or 15 RAW datagrams per round (``--fusion host``: 15
+   filter updates per round on the host), the live session's receiver thread runs the
+   whole per-packet path (decode, sequencing, fusion, body model for 15 segments,
+   retargeting, forward kinematics, session, send) and a robot-server process answers.
+   ``pipeline_ms`` = the receiver's arrival stamp of the oldest contributing packet ->
+   the command's send, over every command of the run. Also the per-packet CPU cost of
+   ``TeleopPipeline.process`` alone, paced at 100 Hz in one process (no sockets but the
+   robot link's).
+2. ``shapes``: the six shapes through the real chain (``right_arm_2``, the paper's two
+   sensors; consumer-grade IMU errors; on-node filters), with the ideal chain (the true
+   orientations on the wire) as an ablation.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import socket
 import time
 
 import numpy as np
 
-from mocapkit.robot import robonaut2_arm
-from mocapkit.robot.segment_retarget import (
-    SegmentRetargeter,
-    robonaut2_groups,
-    robonaut2_init_posture,
-)
+from mocapkit.body.calibration import q_world_ground
+from mocapkit.body.joint_angles import compose_pose
+from mocapkit.body.sensor_tree import SensorTree
+from mocapkit.geometry import quat_exp, quat_mul
+from mocapkit.robot.model import pose_parts
+from mocapkit.suit.protocol import Kind
+from mocapkit.suit.samples import SuitSample
+from mocapkit.teleop import protocol as proto
+from mocapkit.teleop.evaluate import evaluate_shape
 from mocapkit.teleop.link import RobotLink
 from mocapkit.teleop.operator import SHAPES
-from mocapkit.teleop.pipeline import ArmTeleop, OrientationSample
+from mocapkit.teleop.operator_suit import SuitSetup
+from mocapkit.teleop.pipeline import PipelineConfig, TeleopPipeline
 from mocapkit.teleop.session import TeleopSession
 
 
-def pipeline_timing(n_packets: int = 3000, n_sensors: int = 15) -> dict[str, float]:
+def process_cost(n_packets: int = 3000, preset: str = "full_body_15") -> dict[str, float]:
+    """``TeleopPipeline.process`` per packet [us], paced at 100 Hz in one process."""
+    tree = SensorTree.preset(preset)
     rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     rx.bind(("127.0.0.1", 0))
     rx.setblocking(False)
-    arm = robonaut2_arm("right")
-    rt = SegmentRetargeter(arm, robonaut2_groups("right")[:2], robonaut2_init_posture("right"))
     session = TeleopSession()
     with RobotLink(rx.getsockname()) as link:
-        pipe = ArmTeleop(arm, rt, {1: "humerus_r", 2: "radius_r"}, session, link)
-        pipe.keep_frames = False
-        ident = np.array([1.0, 0.0, 0.0, 0.0])
-        pipe.calibrate(dict.fromkeys(range(1, n_sensors + 1), ident))
-        # the robot's pose (a report would carry it): the model's own, so it engages
-        from mocapkit.robot.model import pose_parts
-        from mocapkit.teleop import protocol as proto
-
-        pos, quat = pose_parts(pipe.model_pose()[1])
-        rng = np.random.default_rng(0)
-        lat = []
+        pipe = TeleopPipeline(PipelineConfig(preset=preset), session, link)
+        pose = {c: np.pi / 2 for c in ("pro_sup_r", "pro_sup_l") if c in tree.coordinate_names}
+        q0 = quat_mul(q_world_ground(0.3), compose_pose(tree, pose))
+        n = len(tree.segments)
+        t0 = time.monotonic()
+        pipe.start_calibration(t0, 0.05)
+        while pipe.body is None:
+            now = time.monotonic()
+            pipe.ingest(
+                [SuitSample(i + 1, 0, 0.0, 0, Kind.ORIENTATION, q0[i]) for i in range(n)], now
+            )
+            time.sleep(0.005)
+        T, _ = pipe.model_pose(time.monotonic())
+        assert T is not None
+        pos, quat = pose_parts(T)
         session.engage(time.monotonic())
+        rng = np.random.default_rng(0)
+        cost = []
         for k in range(n_packets):
             link.latest = proto.Report(
                 k, 0, pos, quat, 0, proto.Gate.SYNCED, proto.Reason.OK, np.zeros(7)
             )
             link.latest_t = time.monotonic()
-            wob = rng.normal(0, 0.01, (n_sensors, 3))
-            quats = np.column_stack([np.ones(n_sensors), wob])
-            quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+            wobble = quat_exp(rng.normal(0, 0.002, (n, 3)))
+            q = quat_mul(q0, wobble)
             arrival = time.perf_counter_ns()
-            samples = [OrientationSample(i + 1, arrival, quats[i]) for i in range(n_sensors)]
-            f = pipe.process(samples)
-            if f.latency_ns is not None:
-                lat.append(f.latency_ns / 1e6)
+            samples = [
+                SuitSample(i + 1, k, k * 0.01, arrival, Kind.ORIENTATION, q[i]) for i in range(n)
+            ]
+            t = time.perf_counter_ns()
+            frame = pipe.process(samples, arrival)
+            cost.append((time.perf_counter_ns() - t) / 1e3)
+            assert frame is not None
+            assert frame.command is not None
             try:
                 while True:
                     rx.recv(4096)
             except BlockingIOError:
                 pass
-            time.sleep(0.002)
+            time.sleep(0.01)
     rx.close()
-    a = np.array(lat)
-    return {"packets": len(a), "p50_ms": float(np.percentile(a, 50)),
-            "p99_ms": float(np.percentile(a, 99)), "max_ms": float(a.max())}  # fmt: skip
+    a = np.array(cost)
+    return {"packets": len(a), "p50_us": float(np.percentile(a, 50)),
+            "p99_us": float(np.percentile(a, 99)), "max_us": float(a.max())}  # fmt: skip
+
+
+def pipeline_15(fusion: str, shape_s: float) -> dict[str, object]:
+    r = evaluate_shape(
+        "circle",
+        suit=SuitSetup(fusion=fusion),  # type: ignore[arg-type]
+        pipeline=PipelineConfig(preset="full_body_15"),
+        shape_s=shape_s,
+    )
+    return {"fusion": fusion, **r.summary(), "pipeline_ms_max": r.details["pipeline_ms_max"],
+            "commands": r.details["commands"]}  # fmt: skip
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--no-shapes", action="store_true")
+    ap.add_argument("--only", choices=["pipeline", "shapes"], default=None)
+    ap.add_argument("--filter", default="miller")
+    ap.add_argument("--fusion", default="node", choices=["node", "host"])
+    ap.add_argument("--retarget", default="segments", choices=["segments", "map"])
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--no-ideal", action="store_true", help="skip the ideal-chain ablation")
     args = ap.parse_args()
-    print(json.dumps({"pipeline_15_sensors": pipeline_timing()}, indent=2))
-    if not args.no_shapes:
-        from mocapkit.teleop.evaluate import evaluate_shape
-
-        for shape in SHAPES:
-            print(json.dumps(evaluate_shape(shape).summary()))
+    print(json.dumps({"load_average": os.getloadavg()}))
+    if args.only in (None, "pipeline"):
+        print(json.dumps({"process_cost_15_sensors": process_cost()}))
+        for fusion in ("node", "host"):
+            print(json.dumps({"pipeline_15_sensors_100hz": pipeline_15(fusion, 6.0)}))
+    if args.only in (None, "shapes"):
+        chains = ["real"] if args.no_ideal else ["real", "ideal"]
+        for chain in chains:
+            for shape in SHAPES:
+                suit = SuitSetup(chain=chain, fusion=args.fusion, filter_name=args.filter)  # type: ignore[arg-type]
+                r = evaluate_shape(
+                    shape,
+                    suit=suit,
+                    pipeline=PipelineConfig(retarget=args.retarget, filter_name=args.filter),
+                    seed=args.seed,
+                )
+                extra = {
+                    k: round(v, 3)
+                    for k, v in r.details.items()
+                    if k in ("cmd_rmse_mm", "tracking_rmse_mm")
+                }
+                print(json.dumps({"chain": chain, **r.summary(), **extra}))
+    print(json.dumps({"load_average": os.getloadavg()}))
 
 
 if __name__ == "__main__":

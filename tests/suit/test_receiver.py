@@ -329,3 +329,44 @@ def test_rate_limit_can_be_turned_off_for_fast_replays() -> None:
     assert limited.stats().dropped == {"rate_limited": 1_000}  # the 20 000 burst, then none
     assert free.stats().dropped == {}
     assert free.stats().sensors[1].delivered == 21_000
+
+
+def test_direct_consumer_runs_on_the_receiver_thread(caplog) -> None:  # type: ignore[no-untyped-def]
+    """on_batch gets every delivered sample on the receiver thread, ticks when idle, and
+    a failing consumer costs one call, never the thread."""
+    import threading
+
+    rx_t = UdpTransport.bind("127.0.0.1", 0)
+    _OPEN.append(rx_t)
+    seen: list[tuple[int, int, str]] = []
+    ticks = [0]
+    fail = [True]
+
+    def consume(samples: list, now_ns: int) -> None:  # type: ignore[type-arg]
+        ticks[0] += 1
+        for s in samples:
+            seen.append((s.sensor_id, s.seq, threading.current_thread().name))
+        if samples and fail[0]:
+            fail[0] = False
+            raise RuntimeError("consumer bug")
+
+    tx = UdpTransport.connect("127.0.0.1", rx_t.port)
+    _OPEN.append(tx)
+    with caplog.at_level(logging.ERROR, logger="mocapkit.suit.receiver"):
+        rx = Receiver(rx_t, on_batch=consume).start()
+        try:
+            for seq in range(5):
+                tx.send(_raw(3, seq))
+                time.sleep(0.01)
+            end = time.monotonic() + 5.0
+            while len(seen) < 5 and time.monotonic() < end:
+                time.sleep(0.01)
+            time.sleep(0.05)  # idle: empty ticks (every 5 ms at most)
+        finally:
+            rx.stop()
+    assert [(sid, seq) for sid, seq, _ in seen] == [(3, k) for k in range(5)]
+    assert {name for *_, name in seen} == {"suit-receiver"}
+    assert ticks[0] > 5 + 5  # more calls than batches: the idle ticks
+    assert rx.get_batch(10, 0.0) == []  # nothing queued
+    assert rx.stats().dropped == {"consumer_error": 1}
+    assert "the direct consumer (on_batch) failed" in caplog.text

@@ -111,7 +111,7 @@ def test_server_process_follows_holds_and_survives_garbage():
     ):
         link.send_hold()
         assert link.wait_for_report(10.0)
-        T = link.robot_pose()
+        T = link.robot_pose().copy()
         assert T is not None
         far = T.copy()
         far[1, 3] += 0.2
@@ -143,7 +143,7 @@ def test_server_that_stops_answering_is_detected_and_recovered():
         assert link.wait_for_report(10.0)
         s = TeleopSession()
         s.engage(time.monotonic())
-        model = link.robot_pose()
+        model = link.robot_pose().copy()  # (the link reuses its pose buffer)
 
         def tick():
             link.poll()

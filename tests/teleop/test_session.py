@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import ConfigError
+from mocapkit.teleop import protocol as proto
 from mocapkit.teleop.session import SessionConfig, State, TeleopSession
 
 
@@ -133,3 +134,66 @@ def test_config_validation():
         SessionConfig(mode="sideways")  # type: ignore[arg-type]
     with pytest.raises(ConfigError, match="each min must be below its max"):
         SessionConfig(workspace_min=(1.0, 0.0, 0.0), workspace_max=(0.0, 1.0, 1.0))
+
+
+def test_unreachable_target_is_followed_as_close_as_possible():
+    """The server reports the target out of reach: the session stays engaged (the robot
+    holds its closest pose), says so, and the robot follows again when it comes back."""
+    cfg = SessionConfig(disengage_after_s=0.1, max_speed_m_s=100.0)
+    s = TeleopSession(cfg)
+    stuck = _T(0.60)
+    s.engage(0.0)
+    s.tick(0.0, _T(0.5), _T(0.5), 0.0)
+    for k in range(5):
+        out = s.tick(0.1 + 0.1 * k, _T(0.75), stuck, 0.0, robot_reason=proto.Reason.UNREACHABLE)
+    assert s.state == State.ENGAGED
+    assert out.command is not None
+    assert "target out of reach" in out.notes[-1]
+    out = s.tick(1.0, _T(0.55), stuck, 0.0)  # back within reach
+    assert s.state == State.ENGAGED
+    assert not out.notes
+    # 40 cm beyond: too far to keep following, disengage
+    for k in range(3):
+        s.tick(1.1 + 0.1 * k, _T(1.0), stuck, 0.0, robot_reason=proto.Reason.UNREACHABLE)
+    assert s.state == State.ALIGNING
+    assert s.transitions[-1].reason == (
+        "robot cannot follow: 400 mm, 0 deg away (server: UNREACHABLE)"
+    )
+
+
+def test_a_robot_that_cannot_follow_recovers_by_reindexing_when_the_target_comes_back():
+    """A robot stuck short of its target (no reason given): disengage with a HOLD; when the
+    operator's target comes back within the disengage thresholds of where the robot
+    stopped, the rest is taken up by a reindex, without a jump."""
+    cfg = SessionConfig(disengage_after_s=0.1, max_speed_m_s=100.0)
+    s = TeleopSession(cfg)
+    stuck = _T(0.60)
+    s.engage(0.0)
+    s.tick(0.0, _T(0.5), _T(0.5), 0.0)  # reindexed at the robot's pose: offset 0
+    s.tick(0.1, _T(0.75), stuck, 0.0)
+    out = s.tick(0.25, _T(0.75), stuck, 0.0)
+    assert s.state == State.ALIGNING
+    assert out.hold
+    assert s.transitions[-1].reason == "robot cannot follow: 150 mm, 0 deg away"
+    assert s.tick(0.3, _T(0.70), stuck, 0.0).command is None  # still 10 cm out: waits
+    out = s.tick(0.4, _T(0.65), stuck, 0.0)  # 5 cm from the robot: back
+    assert s.state == State.ENGAGED
+    assert s.transitions[-1].reason == "target back within 50 mm: reindexed"
+    np.testing.assert_allclose(out.command, stuck, atol=1e-12)  # no jump
+    out = s.tick(0.5, _T(0.60), stuck, 0.0)  # and relative motion from there
+    np.testing.assert_allclose(out.command[:3, 3], stuck[:3, 3] - [0.05, 0, 0], atol=1e-12)
+
+
+def test_disable_and_clutch_send_one_hold():
+    s = TeleopSession()
+    s.engage(0.0)
+    s.tick(0.0, _T(), _T(), 0.0)
+    s.clutch(True, 0.1)
+    assert s.hold_pending
+    assert s.tick(0.2, _T(), _T(), 0.0).hold
+    assert not s.tick(0.3, _T(), _T(), 0.0).hold  # once
+    s.disable(0.4)
+    out = s.tick(0.5, _T(), _T(), 0.0)
+    assert out.hold
+    assert out.command is None
+    assert s.state == State.DISABLED

@@ -1,10 +1,10 @@
-"""``mocapkit teleop``: evaluation, robot server, live session, playback."""
+"""``mocapkit teleop``: evaluation, live session, robot server, playback."""
 
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
@@ -13,16 +13,40 @@ from mocapkit.cli.common import EXIT_OK, print_json, progress
 _EXAMPLES = """\
 examples:
   mocapkit teleop evaluate --shape circle --json
-  mocapkit teleop evaluate --shape all --plot fig9.png --record trials.mcap
+  mocapkit teleop evaluate --shape all --plot fig9.png --record trial.mcap
+  mocapkit teleop evaluate --shape box --chain ideal --json      # ablation: no IMU, no filters
+  mocapkit teleop run --suit-port 9000 --control-port 9871 --keys --record session.mcap
   mocapkit teleop server --port 9870 --robot robonaut2-right --latency-ms 30
-  mocapkit teleop playback trials.mcap --server 127.0.0.1:9870 --seconds 20
+  mocapkit teleop playback trial-circle.mcap --server 127.0.0.1:9870 --seconds 20
 """
+_SHAPES = ["vertical", "horizontal", "diagonal", "circle", "box", "infinity"]
+
+
+def _pipeline_args(p: argparse.ArgumentParser) -> None:
+    from mocapkit.imu.filters import available_filters
+
+    p.add_argument("--preset", default="right_arm_2", help="body sensor tree")
+    p.add_argument("--robot", default="robonaut2-right", help="robot arm (intermediate model)")
+    p.add_argument(
+        "--retarget",
+        default="segments",
+        choices=["segments", "map"],
+        help="segments: eq. 16 along the robot's axes (default); map: the YAML joint map",
+    )
+    p.add_argument(
+        "--fusion",
+        default="node",
+        choices=["node", "host"],
+        help="node: orientations fused on the sensor nodes (default); host: RAW samples fused here",
+    )
+    p.add_argument("--filter", default="miller", choices=available_filters())
+    p.add_argument("--latency-ms", type=float, default=30.0, help="robot actuation latency")
 
 
 def register(sub: Any) -> None:
     p = sub.add_parser(
         "teleop",
-        help="robot teleoperation: six-shape evaluation, robot server, playback",
+        help="robot teleoperation: six-shape evaluation, live session, robot server, playback",
         description="Robot teleoperation (Miller et al., sections 5-6).",
         epilog=_EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -31,22 +55,59 @@ def register(sub: Any) -> None:
 
     ev = tsub.add_parser(
         "evaluate",
-        help="the paper's six-shape evaluation, end to end, in real time",
+        help="the paper's six-shape evaluation through the whole chain, in real time",
         epilog="example: mocapkit teleop evaluate --shape infinity --json",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    ev.add_argument(
-        "--shape",
-        default="circle",
-        choices=["vertical", "horizontal", "diagonal", "circle", "box", "infinity", "all"],
-    )
+    ev.add_argument("--shape", default="circle", choices=[*_SHAPES, "all"])
     ev.add_argument("--json", action="store_true", help="print one JSON object on stdout")
-    ev.add_argument("--seed", type=int, default=0, help="noise and mounting seed")
+    ev.add_argument(
+        "--chain",
+        default="real",
+        choices=["real", "ideal"],
+        help="real: IMU signals, filters, suit packets (default); ideal: an ablation with "
+        "the true orientations on the wire",
+    )
+    ev.add_argument("--seed", type=int, default=0, help="sensor errors, mountings, heading")
     ev.add_argument("--shape-seconds", type=float, default=6.0, help="duration of the shape")
-    ev.add_argument("--latency-ms", type=float, default=30.0, help="robot actuation latency")
+    ev.add_argument(
+        "--no-mag-calibration", action="store_true", help="skip the magnetometer calibration"
+    )
+    _pipeline_args(ev)
     ev.add_argument("--plot", type=Path, default=None, help="write a Fig. 9-like PNG")
-    ev.add_argument("--record", type=Path, default=None, help="write commands to an MCAP file")
+    ev.add_argument(
+        "--record",
+        type=Path,
+        default=None,
+        help="record the session (MCAP: full poses, joints, transitions); with --shape all "
+        "one file per shape, NAME-SHAPE.mcap",
+    )
     ev.set_defaults(func=_evaluate)
+
+    rn = tsub.add_parser(
+        "run",
+        help="a live session from a suit stream (UDP), with operator controls",
+        epilog="keys (one per line): c calibrate, e engage, d disengage, r reindex, Enter "
+        "clutch toggle, s status, q quit.\n"
+        "example: mocapkit teleop run --suit-port 9000 --keys --record session.mcap",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    rn.add_argument("--suit-host", default="127.0.0.1", help="address to receive the suit on")
+    rn.add_argument("--suit-port", type=int, default=9000, help="UDP port of the suit stream")
+    rn.add_argument(
+        "--server", default=None, help="robot server HOST:PORT (default: start one here)"
+    )
+    rn.add_argument("--seconds", type=float, default=None, help="stop after this long")
+    rn.add_argument(
+        "--commands", default="", help="scheduled commands, e.g. '1.0:calibrate,3.5:engage'"
+    )
+    rn.add_argument("--control-port", type=int, default=None, help="UDP control socket port")
+    rn.add_argument("--keys", action="store_true", help="read commands from stdin lines")
+    rn.add_argument("--record", type=Path, default=None, help="record the session (MCAP)")
+    rn.add_argument("--calibrate-seconds", type=float, default=1.0, help="calibration hold")
+    rn.add_argument("--json", action="store_true", help="print the final summary as JSON")
+    _pipeline_args(rn)
+    rn.set_defaults(func=_run)
 
     sv = tsub.add_parser(
         "server",
@@ -62,7 +123,7 @@ def register(sub: Any) -> None:
     pb = tsub.add_parser(
         "playback",
         help="play a recorded motion on the robot, looping when it begins and ends together",
-        epilog="example: mocapkit teleop playback trials.mcap --server 127.0.0.1:9870",
+        epilog="example: mocapkit teleop playback trial.mcap --server 127.0.0.1:9870",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     pb.add_argument("recording", type=Path, help="MCAP file with /teleop/command")
@@ -74,38 +135,95 @@ def register(sub: Any) -> None:
 
 
 def _address(text: str) -> tuple[str, int]:
+    from mocapkit.errors import ConfigError
+
     host, _, port = text.rpartition(":")
+    if not port.isdigit():
+        raise ConfigError(f"server: expected HOST:PORT like 127.0.0.1:9870, got {text!r}")
     return (host or "127.0.0.1", int(port))
+
+
+def _pipeline_config(args: argparse.Namespace, fusion: str) -> Any:
+    from mocapkit.teleop.pipeline import PipelineConfig
+
+    return PipelineConfig(
+        preset=args.preset,
+        robot=args.robot,
+        retarget=args.retarget,
+        fusion=fusion,  # type: ignore[arg-type]
+        filter_name=args.filter,
+    )
 
 
 def _evaluate(args: argparse.Namespace) -> int:
     from mocapkit.teleop.evaluate import evaluate_shape, plot_shapes
-    from mocapkit.teleop.operator import SHAPES
+    from mocapkit.teleop.operator_suit import SuitSetup
     from mocapkit.teleop.server import ServerConfig
 
-    shapes = list(SHAPES) if args.shape == "all" else [args.shape]
-    cfg = ServerConfig(latency_s=args.latency_ms / 1e3)
+    shapes = _SHAPES if args.shape == "all" else [args.shape]
+    suit = SuitSetup(
+        chain=args.chain,
+        fusion=args.fusion,
+        filter_name=args.filter,
+        mag_calibration=not args.no_mag_calibration,
+    )
+    server = ServerConfig(robot=args.robot, latency_s=args.latency_ms / 1e3)
     results = []
     for shape in progress(shapes, "teleop evaluate", total=len(shapes)):
-        r = evaluate_shape(shape, seed=args.seed, shape_s=args.shape_seconds, server=cfg)
+        record = args.record
+        if record is not None and len(shapes) > 1:
+            record = record.with_name(f"{record.stem}-{shape}{record.suffix or '.mcap'}")
+        r = evaluate_shape(
+            shape,
+            suit=suit,
+            pipeline=_pipeline_config(args, args.fusion),
+            server=server,
+            seed=args.seed,
+            shape_s=args.shape_seconds,
+            record=record,
+        )
         results.append(r)
         if not args.json:
-            print(r.summary())
+            print({**r.summary(), **{k: v for k, v in r.details.items() if k != "human_rmse_deg"}})
         print(f"{shape}: {'; '.join(r.transitions)}", file=sys.stderr)
+        print(f"{shape}: details {r.details}", file=sys.stderr)
     if args.plot is not None:
         plot_shapes(results, args.plot)
-    if args.record is not None:
-        from mocapkit.teleop.recording import TeleopRecorder
-
-        with TeleopRecorder(args.record) as rec:
-            r = results[0]
-            for row in r.commanded:
-                rec.command(float(row[0]), row[1:4], [1.0, 0.0, 0.0, 0.0])
-            for row in r.achieved:
-                rec.report(float(row[0]), row[1:4], [1.0, 0.0, 0.0, 0.0])
     if args.json:
         out = results[0].summary() if len(results) == 1 else [r.summary() for r in results]
         print_json(out)
+    return EXIT_OK
+
+
+def _run(args: argparse.Namespace) -> int:
+    from mocapkit.teleop.live import LiveConfig
+    from mocapkit.teleop.run import RunOptions, parse_commands, run_live
+    from mocapkit.teleop.server import ServerConfig
+
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(name)s: %(message)s")
+    config = LiveConfig(
+        pipeline=_pipeline_config(args, args.fusion),
+        suit_host=args.suit_host,
+        suit_port=args.suit_port,
+        calibrate_s=args.calibrate_seconds,
+    )
+    options = RunOptions(
+        server=None if args.server is None else _address(args.server),
+        spawn=ServerConfig(robot=args.robot, latency_s=args.latency_ms / 1e3),
+        seconds=args.seconds,
+        commands=parse_commands(args.commands),
+        control_port=args.control_port,
+        keys=sys.stdin if args.keys else None,
+        record=args.record,
+    )
+    summary = run_live(config, options)
+    if args.json:
+        print_json(summary)
+    else:
+        print(
+            f"state {summary['state']}, {summary['commands_sent']} commands, pipeline "
+            f"p50 {summary['pipeline_ms_p50']:.3f} ms p99 {summary['pipeline_ms_p99']:.3f} ms"
+        )
     return EXIT_OK
 
 
@@ -116,47 +234,16 @@ def _server(args: argparse.Namespace) -> int:
 
 
 def _playback(args: argparse.Namespace) -> int:
-    from mocapkit.robot.model import pose_matrix
-    from mocapkit.teleop.link import RobotLink
-    from mocapkit.teleop.recording import loop_trajectory, playback_pose, read_commands
-    from mocapkit.teleop.session import TeleopSession
+    from mocapkit.teleop.playback import play_recording
 
-    traj, check = loop_trajectory(read_commands(args.recording))
+    summary = play_recording(
+        args.recording, _address(args.server), seconds=args.seconds, rate_hz=args.rate_hz
+    )
     print(
-        f"seam {check.seam_pos_m * 1e3:.1f} mm, {check.seam_rot_rad * 57.3:.1f} deg: "
-        f"{'looping' if check.loops else 'playing once'}",
+        f"seam {summary['seam_mm']:.1f} mm: {'looped' if summary['loops'] else 'played once'}, "
+        f"{summary['commands_sent']} commands, tracking {summary['tracking_rmse_mm']:.1f} mm",
         file=sys.stderr,
     )
-    session = TeleopSession()
-    sent = 0
-    with RobotLink(_address(args.server)) as link:
-        link.send_hold()
-        if not link.wait_for_report(5.0):
-            from mocapkit.errors import MocapkitError
-
-            raise MocapkitError(f"no robot server answers at {args.server}")
-        start = time.monotonic()
-        session.engage(start)
-        period = 1.0 / args.rate_hz
-        while (now := time.monotonic()) - start < args.seconds:
-            pos, quat = playback_pose(traj, now - start, check.loops)
-            link.poll()
-            out = session.tick(now, pose_matrix(pos, quat), link.robot_pose(), link.report_age(now))
-            if out.command is not None:
-                link.send_command(out.command)
-                sent += 1
-            elif out.hold:
-                link.send_hold()
-            time.sleep(period)
-        link.send_hold()
-    summary = {
-        "loops": check.loops,
-        "seam_mm": check.seam_pos_m * 1e3,
-        "commands_sent": sent,
-        "transitions": [
-            f"{t.source.value}->{t.target.value}: {t.reason}" for t in session.transitions
-        ],
-    }
     if args.json:
         print_json(summary)
     return EXIT_OK

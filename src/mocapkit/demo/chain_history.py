@@ -29,7 +29,7 @@ from mocapkit.robot.segment_retarget import (
     robonaut2_groups,
     robonaut2_init_posture,
 )
-from mocapkit.teleop.pipeline import FrameLog
+from mocapkit.teleop.arm_pipeline import FrameLog
 from mocapkit.teleop.session import TeleopSession
 
 _MAX_LAG_S = 0.5

@@ -1,6 +1,6 @@
 """A simulated operator who traces the paper's shapes one after the other, for ever.
 
-Each shape is :func:`mocapkit.teleop.operator.operator_motion` (rest in the suit's
+Each shape is :func:`mocapkit.teleop.arm_operator.operator_motion` (rest in the suit's
 initialisation posture, reach, trace, hold) followed by a smooth return to the
 initialisation posture, so shapes chain without a jump and the whole cycle repeats.
 The operator's chest frame is the simulation's world (x forward, y left, z up: ENU with
@@ -21,7 +21,7 @@ from mocapkit._validate import FloatArray
 from mocapkit.errors import ConfigError
 from mocapkit.geometry import quat_from_matrix, quat_mul, quat_normalize
 from mocapkit.series import PoseSeries
-from mocapkit.teleop.operator import INIT_POSTURE, SHAPES, human_right_arm, operator_motion
+from mocapkit.teleop.arm_operator import INIT_POSTURE, SHAPES, human_right_arm, operator_motion
 
 #: suit sensor ID -> (sensor name in the body tree, segment, human-arm frame or None)
 SENSORS: dict[int, tuple[str, str, str | None]] = {

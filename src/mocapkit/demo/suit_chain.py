@@ -53,9 +53,9 @@ from mocapkit.suit.receiver_state import ReceiverConfig
 from mocapkit.suit.samples import SuitSample
 from mocapkit.suit.simulator import SuitSimConfig, SuitSimulator
 from mocapkit.suit.transport import UdpTransport
+from mocapkit.teleop.arm_pipeline import ArmTeleop, OrientationSample
 from mocapkit.teleop.link import RobotLink
 from mocapkit.teleop.operator import SHAPES
-from mocapkit.teleop.pipeline import ArmTeleop, OrientationSample
 from mocapkit.teleop.server import RobotServerProcess, ServerConfig, spawn_robot_server
 from mocapkit.teleop.session import SessionConfig, State, TeleopSession
 from mocapkit.viz.geometry import skeleton_segments
@@ -446,7 +446,10 @@ class SuitTeleopChain:
         if self._error is not None:
             raise MocapkitError(f"the pipeline thread failed: {self._error}") from self._error
         with self._snap_lock:
-            return self._snapshot
+            snap = self._snapshot
+        # the operator-facing message changes on commands: the current one, not the one
+        # of the last publication
+        return snap if snap.message == self._message else replace(snap, message=self._message)
 
     def _safety(self) -> str:
         parts = [self.session.fault] if self.session.fault else []

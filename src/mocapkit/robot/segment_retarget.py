@@ -24,6 +24,12 @@ parent segment:
 Of the two Euler solutions and their 2 pi shifts, the one closest to the previous frame
 (or ``q_init``) is kept, so angles are continuous; they are then clipped to the joint
 limits and the clipped joints are reported.
+
+Two backends with one result (to 1e-9, tested): ``"fast"`` (default), one numba call per
+frame (:mod:`mocapkit.robot._retarget_kernel`, a few microseconds: the teleoperation
+pipeline's per-packet path), and ``"reference"``, the readable numpy code below.
+:meth:`SegmentRetargeter.solve` is the allocation-light form for streaming: (S, 3, 3)
+matrices in :attr:`SegmentRetargeter.segments` order in, the joint vector out.
 """
 
 from __future__ import annotations
@@ -38,11 +44,15 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.errors import ConfigError, DataError
 from mocapkit.geometry import quat_to_matrix
+from mocapkit.robot import _retarget_kernel
 from mocapkit.robot.model import ArmModel
 
 # Consecutive joint axes must be perpendicular within this cosine (0.06 deg): URDF
 # numbers rounded to 1.5708 are 4e-6 off; a genuinely oblique axis is far beyond.
 _PERPENDICULAR_TOL = 1e-3
+# A joint counts as clipped beyond its limit by more than this [rad]: an arm resting on a
+# limit (R2's straight elbow is joint3's upper limit) is not a violation.
+CLIP_TOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -115,9 +125,15 @@ class SegmentRetargeter:
         arm: the robot arm (intermediate kinematic model).
         groups: joint groups in chain order (a group's joints follow its parent's).
         q_init: (n,) robot posture matching the suit's initialisation posture [rad].
+        backend: ``"fast"`` (numba) or ``"reference"`` (numpy); same results.
     """
 
-    def __init__(self, arm: ArmModel, groups: Sequence[JointGroup], q_init: Any) -> None:
+    def __init__(
+        self, arm: ArmModel, groups: Sequence[JointGroup], q_init: Any, backend: str = "fast"
+    ) -> None:
+        if backend not in ("fast", "reference"):
+            raise ConfigError(f"backend: expected 'fast' or 'reference', got {backend!r}")
+        self.backend = backend
         self.arm = arm
         self.q_init = arm.check_q(q_init, "q_init")
         if not groups:
@@ -155,6 +171,7 @@ class SegmentRetargeter:
         }
         self._R0_human: dict[str, FloatArray] | None = None
         self._q_prev = self.q_init.copy()
+        self._build_tables()
 
     # -- setup -----------------------------------------------------------------------------
     def _frame_R(self, q: FloatArray, frame: str | None) -> FloatArray:
@@ -195,6 +212,36 @@ class SegmentRetargeter:
             g, idx, C, psi, virtual, R_local_init, _rot(a2, psi), child_frame, parent_frame
         )
 
+    def _build_tables(self) -> None:
+        """Arrays for the numba kernel (segments in :attr:`segments` order)."""
+        seg_index = {s: i for i, s in enumerate(self.segments)}
+        gs = self._groups
+        self._k_seg = np.array([seg_index[p.group.segment] for p in gs], dtype=np.int64)
+        self._k_parent = np.array(
+            [-1 if p.group.parent is None else seg_index[p.group.parent] for p in gs],
+            dtype=np.int64,
+        )
+        self._k_start = np.array([int(p.idx[0]) for p in gs], dtype=np.int64)
+        self._k_len = np.array([len(p.idx) for p in gs], dtype=np.int64)
+        self._k_C = np.ascontiguousarray(np.stack([p.C for p in gs]))
+        self._k_Rpsi = np.ascontiguousarray(np.stack([p.R_psi for p in gs]))
+        self._k_psi = np.array([p.psi for p in gs])
+        self._k_virtual = np.array([p.virtual_third for p in gs], dtype=np.bool_)
+        self._k_RliT = np.ascontiguousarray(np.stack([p.R_local_init.T for p in gs]))
+        R_init = [self._R_init_robot[s] for s in self.segments]
+        self._k_Rinit = np.ascontiguousarray(np.stack(R_init))
+        self._k_R0T = np.ascontiguousarray(np.tile(np.eye(3), (len(self.segments), 1, 1)))
+        self._k_lower = np.ascontiguousarray(self.arm.lower, dtype=np.float64)
+        self._k_upper = np.ascontiguousarray(self.arm.upper, dtype=np.float64)
+        self._k_targets = np.empty((len(self.segments), 3, 3))
+        self._k_R = np.empty((len(self.segments), 3, 3))
+        self.q = np.empty(self.arm.n)
+        """(n,) the last frame's joint angles [rad] (the array :meth:`solve` returns)."""
+        self.clipped = np.zeros(self.arm.n, dtype=np.bool_)
+        """(n,) joints clipped to a limit in the last frame."""
+        self.dropped = np.zeros(len(gs))
+        """(G,) per group, the angle no joint follows in the last frame [rad]."""
+
     def calibrate(self, R_chest_segment: Mapping[str, Any]) -> None:
         """Store the human segments' orientations in the initialisation posture.
 
@@ -203,6 +250,7 @@ class SegmentRetargeter:
                 of the segment in the chest frame.
         """
         self._R0_human = {s: self._as_matrix(R_chest_segment, s) for s in self.segments}
+        self._k_R0T = np.ascontiguousarray(np.stack([self._R0_human[s].T for s in self.segments]))
         self._q_prev = self.q_init.copy()
 
     def _as_matrix(self, values: Mapping[str, Any], seg: str) -> FloatArray:
@@ -230,10 +278,39 @@ class SegmentRetargeter:
         """Forget the previous frame (continuity restarts from ``q_init``)."""
         self._q_prev = self.q_init.copy()
 
+    def solve(self, R_chest_segment: Any) -> FloatArray:
+        """Fast path for streaming: (S, 3, 3) segment matrices (chest frame, finite, in
+        :attr:`segments` order) -> :attr:`q` (n,) [rad], with :attr:`clipped` and
+        :attr:`dropped` updated. No input checks beyond the calibration."""
+        if self._R0_human is None:
+            raise DataError("retargeting: call calibrate() in the initialisation posture first")
+        _retarget_kernel.retarget_frame(
+            R_chest_segment, self._k_R0T, self._k_Rinit, self._k_seg, self._k_parent,
+            self._k_start, self._k_len, self._k_C, self._k_Rpsi, self._k_psi, self._k_virtual,
+            self._k_RliT, self.q_init, self._k_lower, self._k_upper, self._q_prev, self.q,
+            self.clipped, self.dropped, self._k_targets, CLIP_TOL,
+        )  # fmt: skip
+        return self.q
+
     def joint_angles(self, R_chest_segment: Mapping[str, Any]) -> RetargetResult:
         """Robot joint angles for the segment orientations of one frame (chest frame)."""
         if self._R0_human is None:
             raise DataError("retargeting: call calibrate() in the initialisation posture first")
+        if self.backend == "fast":
+            for i, seg in enumerate(self.segments):
+                self._k_R[i] = self._as_matrix(R_chest_segment, seg)
+            q = self.solve(self._k_R).copy()
+            clipped = tuple(self.arm.joint_names[i] for i in np.flatnonzero(self.clipped))
+            dropped = {
+                p.group.segment: float(self.dropped[g])
+                for g, p in enumerate(self._groups)
+                if p.virtual_third
+            }
+            return RetargetResult(q, clipped, dropped)
+        return self._joint_angles_reference(R_chest_segment)
+
+    def _joint_angles_reference(self, R_chest_segment: Mapping[str, Any]) -> RetargetResult:
+        assert self._R0_human is not None
         targets: dict[str, FloatArray] = {}
         for s in self.segments:
             dR = self._as_matrix(R_chest_segment, s) @ self._R0_human[s].T
@@ -252,7 +329,7 @@ class SegmentRetargeter:
         clipped = tuple(
             self.arm.joint_names[i]
             for i in range(self.arm.n)
-            if q[i] < self.arm.lower[i] or q[i] > self.arm.upper[i]
+            if q[i] < self.arm.lower[i] - CLIP_TOL or q[i] > self.arm.upper[i] + CLIP_TOL
         )
         q = self.arm.clamp(q)
         self._q_prev = q.copy()

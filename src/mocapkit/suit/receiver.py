@@ -10,6 +10,14 @@ per second per reason (with the number suppressed), so a flood cannot flood the 
 Delivered samples go to one bounded queue per sensor; :meth:`Receiver.get_batch` and
 :meth:`Receiver.samples` take from them round-robin, so a sensor that floods only
 overflows its own queue. See the consumer API in docs/architecture.md ("Motion suit").
+
+Direct consumer (``on_batch``): a latency-critical pipeline (teleoperation) can run on the
+receiver thread itself: ``on_batch(samples, now_ns)`` is called after every drained batch
+with the samples it delivered, and at least every 5 ms with an empty list (a tick for
+watchdogs). Those samples are not queued (``get_batch`` returns nothing): no queue, no
+thread hand-off, so a packet's arrival-to-output time does not include waking another
+thread. An exception in ``on_batch`` is counted (``consumer_error``) and logged; the
+thread goes on.
 """
 
 from __future__ import annotations
@@ -43,6 +51,7 @@ class Receiver:
         transport: where frames come from (``UdpTransport.bind(...)``, serial, replay).
         config: :class:`ReceiverConfig`.
         recorder: optional recorder of every frame received (``McapRecorder``).
+        on_batch: direct consumer called on the receiver thread (see the module docstring).
     """
 
     def __init__(
@@ -50,6 +59,7 @@ class Receiver:
         transport: Transport,
         config: ReceiverConfig | None = None,
         recorder: FrameRecorder | None = None,
+        on_batch: Callable[[list[SuitSample], int], None] | None = None,
     ) -> None:
         self.transport = transport
         self.cfg = config or ReceiverConfig()
@@ -71,6 +81,8 @@ class Receiver:
         self._rate_limited = math.isfinite(self.cfg.source_rate_hz)
         self._last_check = 0.0
         self._pending_count = 0
+        self._on_batch = on_batch
+        self._batch: list[SuitSample] = []
 
     # -- lifecycle ------------------------------------------------------------------------
     def start(self) -> Receiver:
@@ -117,7 +129,17 @@ class Receiver:
                     log.exception(
                         "suit receiver: internal error on a %d-byte datagram", len(frame.data)
                     )
-            self._housekeeping(time.perf_counter_ns())
+            now_ns = time.perf_counter_ns()
+            self._housekeeping(now_ns)
+            if self._on_batch is not None:
+                batch, self._batch = self._batch, []
+                try:
+                    self._on_batch(batch, now_ns)
+                except Exception:  # the consumer's bug must not kill the receiver
+                    self._stats.dropped["consumer_error"] = (
+                        self._stats.dropped.get("consumer_error", 0) + 1
+                    )
+                    log.exception("suit receiver: the direct consumer (on_batch) failed")
 
     # -- per frame ------------------------------------------------------------------------
     def handle(self, frame: Frame) -> None:
@@ -271,6 +293,20 @@ class Receiver:
 
     def _deliver(self, s: SensorState, sample: SuitSample) -> None:
         st = s.stats
+        if self._on_batch is not None:
+            self._batch.append(sample)
+            full = False
+        else:
+            full = self._enqueue(s, sample)
+        if full:
+            st.queue_dropped += 1
+            self._drop(
+                "queue_full", f"sensor {st.sensor_id}: consumer too slow, oldest sample dropped"
+            )
+        self._account(s, sample)
+
+    def _enqueue(self, s: SensorState, sample: SuitSample) -> bool:
+        """Queue a sample for get_batch; True when the queue was full (oldest dropped)."""
         with self._cv:
             full = len(s.queue) >= self.cfg.queue_per_sensor
             if full:
@@ -279,11 +315,11 @@ class Receiver:
                 self._ready += 1
             s.queue.append(sample)
             self._cv.notify()
-        if full:
-            st.queue_dropped += 1
-            self._drop(
-                "queue_full", f"sensor {st.sensor_id}: consumer too slow, oldest sample dropped"
-            )
+        return full
+
+    def _account(self, s: SensorState, sample: SuitSample) -> None:
+        """Freshness, latency and rate figures, listeners and the recorder."""
+        st = s.stats
         t_s = sample.t_sensor_s
         if not math.isfinite(t_s) or t_s > s.t_sensor_max:
             if math.isfinite(t_s):

@@ -1,74 +1,80 @@
 """The paper's evaluation, end to end (Miller et al., section 5, Figs. 8-9).
 
-For one shape: the simulated operator (``operator.py``) traces it; the sensors on the
-upper arm (1) and forearm (2) (random mountings) produce orientations; the per-packet
-pipeline (``ArmTeleop``: watchdog, eq. 16 retargeting onto Robonaut 2, intermediate
-model, session) sends commands over UDP to a robot-server *process*, in real time.
+For one shape, in real time, through the real chain:
 
-PROVISIONAL (until the suit and body parts land on main): the sensors' orientations are
-the truth with an orientation-error model (white noise + random walk per axis) instead
-of suit packets -> receiver -> filters -> body model.
+1. the simulated operator (:mod:`mocapkit.teleop.operator`) stands in the calibration
+   pose, raises the hand to the working point and traces the shape;
+2. the simulated suit (:mod:`mocapkit.teleop.operator_suit`) turns the sensors' poses into
+   IMU signals with sensor errors, runs the nodes' filters (or forwards RAW samples) and
+   the hub, and a separate process sends the frames over UDP on the real clock;
+3. a :class:`~mocapkit.teleop.live.LiveSession` receives them (suit receiver), fuses (on
+   the host, if asked), calibrates the body model from the held pose (as a real session
+   does: the operator is told to hold still, then ``calibrate()``), retargets, runs the
+   session (``engage()`` at the working point: reindexing) and sends commands to
+4. a robot-server process (own IK, joint limits, actuation latency, safety gate), whose
+   pose reports come back.
 
-Figures (over the shape only):
-- ``lag_ms``: the shift of the achieved path that best matches the commanded one;
-- ``ee_rmse_mm``: achieved vs the truth command (the intermediate model driven by the
-  true segment orientations, reindexed at the same instant), after removing the lag;
-- ``joint_rmse_deg``: intermediate-model joint angles vs those from the truth (the 5
-  teleoperated joints);
-- ``pipeline_ms_p50/p99``: per packet, arrival to command sent.
+The truth is the same body model, retargeting and intermediate model fed with the true
+segment orientations (:func:`truth_model`), reindexed at the same instant.
+
+Figures, over the shape (``shape_start`` to ``shape_end``):
+
+- ``lag_ms``: the shift (0-500 ms) of the achieved path that best matches the commanded
+  one: the robot's own tracking lag (actuation latency + IK), reported separately;
+- ``ee_rmse_mm``: the achieved path, shifted back by that lag, against the truth command;
+- ``joint_rmse_deg``: the intermediate model's joint angles against the truth's (the joints
+  the suit drives: 5 of R2's 7 with two sensors);
+- ``pipeline_ms_p50/p99``: host-side time per command, from the receiver's arrival stamp of
+  the oldest contributing packet to the command's send, over the whole run.
+
+The ideal chain (``--chain ideal``) is an ablation: the true orientations go over the
+same wire and through the same host side, without IMU errors and filters.
 """
 
 from __future__ import annotations
 
+import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from mocapkit._validate import FloatArray
-from mocapkit.geometry import quat_exp, quat_from_matrix, quat_mul
-from mocapkit.robot.robonaut2 import robonaut2_arm
-from mocapkit.robot.segment_retarget import (
-    SegmentRetargeter,
-    robonaut2_groups,
-    robonaut2_init_posture,
-)
-from mocapkit.teleop import protocol as proto
-from mocapkit.teleop.link import RobotLink
+from mocapkit.body.calibration import HeadingFixed, calibrate_pose
+from mocapkit.body.sensor_tree import SensorTree
+from mocapkit.series import OrientationSeries
+from mocapkit.teleop.live import LiveConfig, LiveSession
 from mocapkit.teleop.operator import OperatorMotion, operator_motion
-from mocapkit.teleop.pipeline import ArmTeleop, OrientationSample
+from mocapkit.teleop.operator_suit import Dropout, SuitSetup, suit_timeline
+from mocapkit.teleop.pipeline import PipelineConfig, TeleopPipeline
+from mocapkit.teleop.sender import TimelineSender
 from mocapkit.teleop.server import ServerConfig, spawn_robot_server
 from mocapkit.teleop.session import SessionConfig, TeleopSession
 
-SENSORS = {1: "humerus_r", 2: "radius_r"}
-_TELEOP_JOINTS = slice(0, 5)  # the paper teleoperates 5 of R2's 7 joints
-
-
-@dataclass(frozen=True)
-class NoiseModel:
-    """Provisional orientation error per sensor: white noise [rad] + random walk
-    [rad/sqrt(s)] per axis, applied on the sensor side."""
-
-    white_rad: float = float(np.radians(0.3))
-    walk_rad_per_sqrt_s: float = float(np.radians(0.05))
+log = logging.getLogger("mocapkit.teleop.evaluate")
+_NICE = 10
 
 
 @dataclass
 class EvalResult:
+    """One shape's figures (see the module docstring) and the paths behind them."""
+
     shape: str
     ee_rmse_mm: float
     lag_ms: float
     pipeline_ms_p50: float
     pipeline_ms_p99: float
     joint_rmse_deg: float
+    details: dict[str, Any] = field(default_factory=dict)
     commanded: FloatArray = field(repr=False, default_factory=lambda: np.zeros((0, 4)))
     achieved: FloatArray = field(repr=False, default_factory=lambda: np.zeros((0, 4)))
     truth: FloatArray = field(repr=False, default_factory=lambda: np.zeros((0, 4)))
     transitions: list[str] = field(default_factory=list)
 
     def summary(self) -> dict[str, Any]:
+        """Exactly the six figures of ``mocapkit teleop evaluate --json``."""
         return {
             "shape": self.shape,
             "ee_rmse_mm": round(self.ee_rmse_mm, 3),
@@ -79,152 +85,204 @@ class EvalResult:
         }
 
 
-def _sensor_quats(
-    motion: OperatorMotion, rng: np.random.Generator, noise: NoiseModel
-) -> tuple[dict[int, FloatArray], dict[int, FloatArray]]:
-    """(true, measured) q_world_sensor (N, 4) per sensor, with random mountings."""
+def truth_model(
+    motion: OperatorMotion, config: PipelineConfig
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The intermediate model driven by the true segment orientations: robot joints (N, n),
+    end-effector poses (N, 4, 4) and human joint angles (N, K), through the same body model
+    (calibrated on the truth in the same pose window), retargeting and forward kinematics."""
+    cfg = replace(config, heading_axis=None, heading_rad=motion.heading_rad, fusion="node")
+    pipe = TeleopPipeline(cfg, TeleopSession(SessionConfig()), None)
+    tree = motion.tree
+    series = {
+        s.sensor: OrientationSeries(motion.time, motion.q_world_segment[:, i], name=s.sensor)
+        for i, s in enumerate(tree.segments)
+    }
+    calib = calibrate_pose(
+        tree, series, motion.calib_window, pose=cfg.pose, heading=HeadingFixed(motion.heading_rad)
+    )
+    pipe.set_calibration(calib)
     n = len(motion.time)
-    dt = float(np.median(np.diff(motion.time)))
-    true: dict[int, FloatArray] = {}
-    meas: dict[int, FloatArray] = {}
-    for sid, seg in SENSORS.items():
-        mount = rng.normal(size=4)
-        mount /= np.linalg.norm(mount)
-        q_seg = quat_from_matrix(motion.R_segments[seg])
-        q = quat_mul(q_seg, mount)
-        walk = np.cumsum(rng.normal(0, noise.walk_rad_per_sqrt_s * np.sqrt(dt), (n, 3)), axis=0)
-        err = walk + rng.normal(0, noise.white_rad, (n, 3))
-        true[sid] = q
-        meas[sid] = quat_mul(q, quat_exp(0.5 * err))
-    return true, meas
+    q = np.empty((n, pipe.arm.n))
+    T = np.empty((n, 4, 4))
+    angles = np.empty((n, len(tree.coordinate_names)))
+    for k in range(n):
+        t = float(motion.time[k])
+        pipe.q_sensor[:] = motion.q_world_segment[k]
+        pipe.t_valid[:] = t
+        Tk, fault = pipe.model_pose(t)
+        if Tk is None or pipe.q_robot is None or pipe.angles is None:
+            raise RuntimeError(f"truth model: no pose at {t:.2f} s ({fault})")
+        q[k], T[k], angles[k] = pipe.q_robot, Tk, pipe.angles
+    return q, T, angles
 
 
-def _lag_and_rmse(
-    t: FloatArray, cmd: FloatArray, t_ach: FloatArray, ach: FloatArray, ref: FloatArray
-) -> tuple[float, float]:
-    """Best lag [s] (0..0.5 s) aligning achieved to commanded, and the RMSE [m] of the
-    achieved path against ``ref`` shifted by that lag."""
-    lags = np.arange(0.0, 0.5, 0.002)
-    costs = []
-    for lag in lags:
-        shifted = np.stack([np.interp(t + lag, t_ach, ach[:, k]) for k in range(3)], axis=1)
-        costs.append(np.mean(np.sum((shifted - cmd) ** 2, axis=1)))
-    lag = float(lags[int(np.argmin(costs))])
-    shifted = np.stack([np.interp(t + lag, t_ach, ach[:, k]) for k in range(3)], axis=1)
-    rmse = float(np.sqrt(np.mean(np.sum((shifted - ref) ** 2, axis=1))))
-    return lag, rmse
+def interp_rows(t: FloatArray, tp: FloatArray, xp: FloatArray) -> FloatArray:
+    """Each column of ``xp`` (M, k) at times ``tp`` linearly interpolated at ``t``."""
+    return np.stack([np.interp(t, tp, xp[:, k]) for k in range(xp.shape[1])], axis=1)
+
+
+def best_lag(t: FloatArray, cmd: FloatArray, t_ach: FloatArray, ach: FloatArray) -> float:
+    """The shift [s] (0-0.5 s, 1 ms steps) of the achieved path that matches the commanded."""
+    lags = np.arange(0.0, 0.5, 0.001)
+    costs = [np.mean(np.sum((interp_rows(t + lag, t_ach, ach) - cmd) ** 2, axis=1)) for lag in lags]
+    return float(lags[int(np.argmin(costs))])
 
 
 def evaluate_shape(
     shape: str,
+    *,
+    suit: SuitSetup | None = None,
+    pipeline: PipelineConfig | None = None,
+    session: SessionConfig | None = None,
+    server: ServerConfig | None = None,
     seed: int = 0,
     shape_s: float = 6.0,
-    server: ServerConfig | None = None,
-    noise: NoiseModel | None = None,
-    plot: Path | None = None,
+    dropouts: tuple[Dropout, ...] = (),
+    record: Path | None = None,
+    live_hook: Any = None,
+    size_m: float = 0.10,
 ) -> EvalResult:
-    """Run one shape through the whole chain in real time (about shape_s + 4.5 s)."""
+    """Run one shape through the chain in real time (about ``shape_s`` + 7 s).
+
+    ``size_m`` is the shape's size at the operator's hand [m]. ``live_hook(live, t_go,
+    motion, server)``, if given, is called on the main thread right after the calibration
+    starts (fault scenarios: pause the server, inject samples...), and must return.
+    """
+    suit = suit or SuitSetup()
+    pipe_cfg = pipeline or PipelineConfig()
+    if suit.chain == "real":
+        pipe_cfg = replace(pipe_cfg, fusion=suit.fusion)
+    else:
+        pipe_cfg = replace(pipe_cfg, fusion="node")
     rng = np.random.default_rng(seed)
-    motion = operator_motion(shape, shape_s=shape_s)
-    _true_q, meas_q = _sensor_quats(motion, rng, noise or NoiseModel())
-    arm = robonaut2_arm("right")
-    q_init = robonaut2_init_posture("right")
-    groups = robonaut2_groups("right")[:2]  # the paper's two sensors: 5 joints
-    truth_rt = SegmentRetargeter(arm, groups, q_init)
-    R0 = {seg: motion.R_segments[seg][0] for seg in SENSORS.values()}
-    truth_rt.calibrate(R0)
-    q_truth = np.stack(
-        [
-            truth_rt.joint_angles({s: motion.R_segments[s][k] for s in SENSORS.values()}).q
-            for k in range(len(motion.time))
-        ]
+    tree = SensorTree.preset(pipe_cfg.preset)
+    heading = float(rng.uniform(-np.pi, np.pi))  # the operator faces anywhere (9D world)
+    motion = operator_motion(
+        shape, tree, rate_hz=suit.rate_hz, shape_s=shape_s, heading_rad=heading
     )
-    T_truth = arm.fk_batch(q_truth)
-    reports: list[tuple[float, FloatArray]] = []
+    ids = {n: i + 1 for i, n in enumerate(tree.sensor_names)}
+    if pipe_cfg.sensor_ids is not None:
+        ids = dict(pipe_cfg.sensor_ids)
+    items, _poses = suit_timeline(motion, suit, ids, rng, dropouts)
+    q_truth, T_truth, angles_truth = truth_model(motion, pipe_cfg)
+    srv_cfg = server or ServerConfig(robot=pipe_cfg.robot)
+    live_cfg = LiveConfig(pipeline=pipe_cfg, session=session or SessionConfig())
+    end = float(motion.time[-1])
+    # the suit and the robot run on their own hardware; here they share the machine, at a
+    # lower priority so they do not preempt the host pipeline being measured
+    with spawn_robot_server(srv_cfg, max_seconds=end + 120, nice=_NICE) as srv:
+        live = LiveSession(live_cfg, srv.address, record=record, keep_frames=True)
+        with live, TimelineSender(items, "127.0.0.1", live.suit_port, nice=_NICE) as sender:
+            if not _wait(lambda: live.link.latest is not None, 10.0):
+                raise RuntimeError("the robot server does not report")
+            t_go = sender.go()
+            w0, w1 = motion.calib_window
+            _sleep_until(t_go + w0)
+            live.calibrate(w1 - w0, wait=False)
+            if live_hook is not None:
+                live_hook(live, t_go, motion, srv)
+            _sleep_until(t_go + motion.engage_t)
+            live.engage()
+            sent = sender.wait(end + 30.0)
+            _sleep_until(time.perf_counter() + 0.5)
+        transitions = [
+            f"{tr.source.value}->{tr.target.value}: {tr.reason}" for tr in live.session.transitions
+        ]
+        result = _figures(shape, motion, live, q_truth, T_truth, angles_truth, transitions)
+    result.details.update(
+        {
+            "chain": suit.chain,
+            "fusion": pipe_cfg.fusion,
+            "filter": suit.filter_name if pipe_cfg.fusion == "node" else pipe_cfg.filter_name,
+            "retarget": pipe_cfg.retarget,
+            "preset": pipe_cfg.preset,
+            "heading_deg": float(np.degrees(heading)),
+            "sender_late_ms_p99": sent["late_ms_p99"],
+            "calibration": live.snapshot().get("calibration"),
+        }
+    )
+    return result
 
-    def on_report(t: float, r: proto.Report) -> None:
-        reports.append((t, r.pos.copy()))
 
-    cfg = server or ServerConfig()
-    with (
-        spawn_robot_server(cfg, max_seconds=shape_s + 60) as srv,
-        RobotLink(srv.address, on_report=on_report) as link,
-    ):
-        link.send_hold()
-        link.wait_for_report(10.0)
-        session = TeleopSession(SessionConfig())
-        pipe = ArmTeleop(
-            robonaut2_arm("right"),
-            SegmentRetargeter(robonaut2_arm("right"), groups, q_init),
-            SENSORS,
-            session,
-            link,
-        )
-        pipe.calibrate({sid: meas_q[sid][0] for sid in SENSORS})
-        rate = 1.0 / float(np.median(np.diff(motion.time)))
-        engage_k = int((motion.shape_start - 0.5) * rate)
-        start = time.monotonic()
-        t_frames = []
-        for k in range(len(motion.time)):
-            due = start + motion.time[k]
-            while (now := time.monotonic()) < due:
-                time.sleep(min(0.002, due - now))
-            if k == engage_k:
-                session.engage(time.monotonic())
-            arrival = time.perf_counter_ns()
-            samples = [OrientationSample(sid, arrival, meas_q[sid][k]) for sid in SENSORS]
-            pipe.process(samples)
-            t_frames.append(time.monotonic() - start)
-        end = time.monotonic() + 0.5
-        while time.monotonic() < end:
-            link.poll()
-            time.sleep(0.005)
-    frames = pipe.frames
-    t_rel = np.array(t_frames)
-    sel = (motion.time >= motion.shape_start) & (motion.time <= motion.shape_end)
-    cmd_ok = np.array([f.out.command is not None for f in frames])
-    use = sel & cmd_ok
-    if use.sum() < 10:
-        raise RuntimeError(
-            f"{shape}: the session never engaged; transitions: {session.transitions}"
-        )
-    cmds = [f.out.command for f, u in zip(frames, use, strict=True) if u]
-    cmd = np.stack([c[:3, 3] for c in cmds if c is not None])
-    dp, _ = session.offset()
-    # the truth command: the same offset taken at the same instant from the truth model
-    first = int(np.flatnonzero(cmd_ok)[0])
-    T_first = frames[first].T_model
-    assert T_first is not None
-    dp_truth = dp + T_first[:3, 3] - T_truth[first][:3, 3]
-    ref = T_truth[use][:, :3, 3] + dp_truth
-    t_rep = np.array([r[0] for r in reports]) - start
-    p_rep = np.stack([r[1] for r in reports])
-    lag, rmse = _lag_and_rmse(t_rel[use], cmd, t_rep, p_rep, ref)
-    q_est = np.stack([f.q for f, u in zip(frames, use, strict=True) if u])  # type: ignore[misc]
-    jerr = q_est[:, _TELEOP_JOINTS] - q_truth[use][:, _TELEOP_JOINTS]
-    lat = np.array([f.latency_ns for f in frames if f.latency_ns is not None]) / 1e6
-    achieved = np.stack([np.interp(t_rel[use] + lag, t_rep, p_rep[:, k]) for k in range(3)], 1)
-    result = EvalResult(
+def _wait(pred: Any, timeout_s: float) -> bool:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(0.01)
+    return False
+
+
+def _sleep_until(t_perf: float) -> None:
+    wait = t_perf - time.perf_counter()
+    if wait > 0:
+        time.sleep(wait)
+
+
+def _figures(
+    shape: str,
+    motion: OperatorMotion,
+    live: LiveSession,
+    q_truth: FloatArray,
+    T_truth: FloatArray,
+    angles_truth: FloatArray,
+    transitions: list[str],
+) -> EvalResult:
+    rate = 1.0 / float(np.median(np.diff(motion.time)))
+    frames = [f for f in live.pipeline.frames if f.command is not None and f.q_robot is not None]
+    if len(frames) < 10:
+        raise RuntimeError(f"{shape}: the session never engaged; transitions: {transitions}")
+    k = np.array([round(f.t_sensor * rate) for f in frames])
+    k = np.clip(k, 0, len(motion.time) - 1)
+    t_cmd = np.array([f.t for f in frames])
+    cmd = np.stack([f.command[:3, 3] for f in frames if f.command is not None])
+    # the truth command: the truth model reindexed at the first command (= the robot's pose)
+    ref = T_truth[k, :3, 3] + (cmd[0] - T_truth[k[0], :3, 3])
+    sel = (motion.time[k] >= motion.shape_start) & (motion.time[k] <= motion.shape_end)
+    if sel.sum() < 10:
+        raise RuntimeError(f"{shape}: no command during the shape; transitions: {transitions}")
+    t_rep = np.array([t for t, _ in live.reports])
+    p_rep = np.stack([r.pos for _, r in live.reports])
+    lag = best_lag(t_cmd[sel], cmd[sel], t_rep, p_rep)
+    achieved = interp_rows(t_cmd + lag, t_rep, p_rep)
+    ee = np.sqrt(np.mean(np.sum((achieved[sel] - ref[sel]) ** 2, axis=1)))
+    cmd_err = np.sqrt(np.mean(np.sum((cmd[sel] - ref[sel]) ** 2, axis=1)))
+    track = np.sqrt(np.mean(np.sum((achieved[sel] - cmd[sel]) ** 2, axis=1)))
+    q_est = np.stack([f.q_robot for f in frames if f.q_robot is not None])
+    driven = np.ptp(q_truth, axis=0) > 1e-6  # the joints the suit moves
+    jerr = q_est[sel][:, driven] - q_truth[k[sel]][:, driven]
+    ang = np.stack([f.angles for f in frames if f.angles is not None])
+    herr = np.degrees(np.sqrt(np.mean((ang[sel] - angles_truth[k[sel]]) ** 2, axis=0)))
+    lat = live.pipeline.latency_ms()
+    t0 = t_cmd[0]
+    return EvalResult(
         shape,
-        rmse * 1e3,
+        float(ee * 1e3),
         lag * 1e3,
         float(np.percentile(lat, 50)),
         float(np.percentile(lat, 99)),
         float(np.degrees(np.sqrt(np.mean(jerr**2)))),
-        commanded=np.column_stack([t_rel[use], cmd]),
-        achieved=np.column_stack([t_rel[use], achieved]),
-        truth=np.column_stack([t_rel[use], ref]),
-        transitions=[
-            f"{tr.source.value}->{tr.target.value}: {tr.reason}" for tr in session.transitions
-        ],
+        details={
+            "cmd_rmse_mm": float(cmd_err * 1e3),
+            "tracking_rmse_mm": float(track * 1e3),
+            "human_rmse_deg": {
+                c: round(float(v), 3)
+                for c, v in zip(motion.tree.coordinate_names, herr, strict=True)
+            },
+            "commands": len(frames),
+            "pipeline_ms_max": float(lat.max()),
+        },
+        commanded=np.column_stack([t_cmd[sel] - t0, cmd[sel]]),
+        achieved=np.column_stack([t_cmd[sel] - t0, achieved[sel]]),
+        truth=np.column_stack([t_cmd[sel] - t0, ref[sel]]),
+        transitions=transitions,
     )
-    if plot is not None:
-        plot_shapes([result], plot)
-    return result
 
 
 def plot_shapes(results: list[EvalResult], path: Path) -> None:
-    """Fig. 9: commanded (green) vs achieved (blue) end-effector paths, chest y-z plane."""
+    """Fig. 9: commanded (green) and achieved (blue) end-effector paths in the chest's
+    frontal plane (y left, z up), the truth dashed."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -234,6 +292,7 @@ def plot_shapes(results: list[EvalResult], path: Path) -> None:
     rows = (len(results) + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(4 * cols, 4 * rows), squeeze=False)
     for ax, r in zip(axes.flat, results, strict=False):
+        ax.plot(r.truth[:, 2] * 1e3, r.truth[:, 3] * 1e3, "k--", lw=0.8, label="truth")
         ax.plot(r.commanded[:, 2] * 1e3, r.commanded[:, 3] * 1e3, "g-", label="commanded")
         ax.plot(r.achieved[:, 2] * 1e3, r.achieved[:, 3] * 1e3, "b-", label="achieved")
         ax.set_title(f"{r.shape}: {r.ee_rmse_mm:.1f} mm RMSE, lag {r.lag_ms:.0f} ms")

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from mocapkit._validate import FloatArray
-from mocapkit.robot.model import pose_matrix, pose_parts
+from mocapkit.teleop import _kernels
 from mocapkit.teleop import protocol as proto
 
 log = logging.getLogger("mocapkit.teleop.link")
@@ -40,6 +40,9 @@ class RobotLink:
         self.on_report = on_report
         self.malformed = 0
         self.send_errors = 0
+        self._quat = np.empty(4)
+        self._pose = np.eye(4)
+        self._pose_of: proto.Report | None = None
 
     def close(self) -> None:
         self.sock.close()
@@ -60,10 +63,11 @@ class RobotLink:
             return False
 
     def send_command(self, T_base_ee: Any) -> int:
-        """Send a pose (4, 4); returns its sequence number."""
+        """Send a pose (4, 4) [m]; returns its sequence number."""
         self.seq += 1
-        pos, quat = pose_parts(T_base_ee)
-        self._send(proto.encode_command(self.seq, time.monotonic_ns(), pos, quat))
+        T = np.asarray(T_base_ee, dtype=np.float64)
+        _kernels.mat_to_quat(T, self._quat)
+        self._send(proto.encode_command(self.seq, time.monotonic_ns(), T[:3, 3], self._quat))
         return self.seq
 
     def send_hold(self) -> None:
@@ -94,10 +98,17 @@ class RobotLink:
                     self.on_report(t, msg)
 
     def robot_pose(self) -> FloatArray | None:
-        """The latest reported pose T_base_ee (4, 4), or None."""
-        if self.latest is None:
+        """The latest reported pose T_base_ee (4, 4), or None. Computed once per report
+        into one buffer: copy it to keep it."""
+        latest = self.latest
+        if latest is None:
             return None
-        return pose_matrix(self.latest.pos, self.latest.quat)
+        if self._pose_of is not latest:
+            if not np.isfinite(latest.quat).all() or not latest.quat.any():
+                return None  # a report with a broken pose: as good as none
+            _kernels.pose_from_parts(latest.pos, latest.quat, self._pose)
+            self._pose_of = latest
+        return self._pose
 
     def report_age(self, now: float | None = None) -> float:
         """Seconds since the latest report (inf when none)."""

@@ -1,200 +1,591 @@
-"""Per-packet teleoperation pipeline: sensor orientations -> robot command on the wire.
+"""The per-packet teleoperation pipeline: suit samples -> robot command on the wire.
 
-``ArmTeleop.process(samples)`` takes the samples that arrived in one packet (each with
-``sensor_id``, ``t_arrival_ns`` and ``quat`` = ``q_world_sensor`` [w, x, y, z] or None,
-the fields of the suit receiver's samples), and runs: sensor watchdog -> segment
-orientations in the chest frame -> retargeting (eq. 16, ``SegmentRetargeter``) ->
-intermediate model FK (``T_chest_ee``) -> session -> robot link. It returns the host-side
-time from the packet's arrival to the command's ``send`` [ns] (``pipeline_ms``).
+``TeleopPipeline.process(samples, now_ns)`` takes the samples the suit receiver delivered
+in one drained batch (a hub bundle, or the RAW datagrams of a round) and runs, on the
+caller's thread (the receiver's, see :class:`mocapkit.teleop.live.LiveSession`):
 
-Segment orientations: only rotations since the initialisation posture matter to the
-retargeting (``dR = R(t) R(0)^T``), so a sensor's mounting on its segment cancels; the
-chest frame is the world rotated by the operator's heading at calibration, or follows a
-root (chest) sensor when one is given (the paper's third sensor, section 6).
+1. per sample: host-side fusion for RAW samples (one :class:`StillStartFilter` around a
+   registry filter per sensor: ``--fusion host``), or the node's own orientation
+   (``--fusion node``, the paper's design); the quaternion is checked (finite, unit);
+2. the sensor watchdog: every sensor of the tree must have brought a valid sample within
+   ``stale_after_s``, else the session holds and says which sensor and why;
+3. the body model (:class:`mocapkit.body.kinematics.BodyStream`, calibrated from a held
+   pose by :meth:`TeleopPipeline.start_calibration`): segment orientations and the
+   human joint angles (OpenSim coordinates);
+4. retargeting onto the robot: ``segments`` (the paper's eq. 16 along the robot's own
+   axes, :class:`~mocapkit.robot.segment_retarget.SegmentRetargeter`) or ``map`` (a
+   YAML joint map on the joint angles); joints clipped to a limit are reported;
+5. the intermediate model's forward kinematics, ``T_chest_ee``;
+6. the session (:class:`~mocapkit.teleop.session.TeleopSession`): reindexing, the engage
+   gate, workspace and speed limits, the link watchdog;
+7. the command (or a HOLD) leaves on the robot link.
+
+``pipeline_ms`` is the host-side time from the oldest contributing sample's arrival (the
+receiver's ``t_arrival_ns``, taken when the datagram was read) to the command's send.
+
+The chest frame (the robot's command frame, x forward, y left, z up): the body's heading
+at calibration when the tree's root hangs from the ground (``right_arm_2``), or the
+torso segment when the tree has one (``right_arm_torso_3``: the section-6 root sensor, so
+the operator may turn).
 """
 
 from __future__ import annotations
 
+import logging
+import math
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Literal
 
 import numpy as np
 
 from mocapkit._validate import FloatArray
-from mocapkit.errors import DataError
+from mocapkit.body.calibration import (
+    BodyCalibration,
+    HeadingFixed,
+    HeadingFromSensor,
+    calibrate_pose,
+    pose_coordinates,
+)
+from mocapkit.body.joint_angles import compose_pose
+from mocapkit.body.kinematics import BodyStream
+from mocapkit.body.sensor_tree import SensorTree
+from mocapkit.errors import ConfigError, MocapkitError
 from mocapkit.geometry import quat_to_matrix
-from mocapkit.robot.model import ArmModel
-from mocapkit.robot.segment_retarget import SegmentRetargeter
+from mocapkit.imu.filters import make_filter
+from mocapkit.imu.still_start import StillStartFilter
+from mocapkit.robot.registry import robot_arm
+from mocapkit.robot.retarget_map import packaged_map
+from mocapkit.robot.segment_retarget import (
+    SegmentRetargeter,
+    robonaut2_groups,
+    robonaut2_init_posture,
+)
+from mocapkit.series import OrientationSeries
+from mocapkit.suit.protocol import Kind
+from mocapkit.teleop import _kernels
+from mocapkit.teleop.heading import HingeHeading
 from mocapkit.teleop.link import RobotLink
-from mocapkit.teleop.session import TeleopSession, TickOutput
+from mocapkit.teleop.session import State, TeleopSession, TickOutput
+
+log = logging.getLogger("mocapkit.teleop.pipeline")
+
+#: chest coordinates (x forward, y left, z up) -> OpenSim segment coordinates (x anterior,
+#: y up, z right): ``R_world_chest = R_world_segment @ CHEST_IN_SEGMENT``.
+CHEST_IN_SEGMENT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+CHEST_SEGMENT = "torso"
+_LATENCY_CAPACITY = 1 << 17
 
 
-class SampleLike(Protocol):
-    sensor_id: int
-    t_arrival_ns: int
-    quat: Any
+@dataclass(frozen=True)
+class PipelineConfig:
+    """What the pipeline runs (SI units).
+
+    Attributes:
+        preset: body sensor tree (``right_arm_2``: the paper; ``right_arm_torso_3``).
+        sensor_ids: ``(sensor name, suit ID)`` pairs; default: the tree's sensors in order,
+            IDs 1, 2, ... (the paper: 1 upper arm, 2 forearm).
+        robot: robot arm (``mocapkit.robot.available_robots()``), also the intermediate model.
+        retarget: ``"segments"`` (eq. 16 along the robot's axes; Robonaut 2) or ``"map"``
+            (the robot's packaged YAML joint map on the human joint angles).
+        fusion: ``"node"`` (orientations fused on the nodes) or ``"host"`` (RAW samples
+            fused here).
+        filter_name, rate_hz, use_mag: host-side fusion (registry name, sample rate, 9D).
+        still_start_s: host-side fusion: the first seconds of each sensor are a still start
+            (gyroscope bias and orientation, :mod:`mocapkit.imu.still_start`); 0: off.
+        stale_after_s: a sensor without a valid sample this long holds the session.
+        pose: the calibration pose (``npose``: the paper's initialisation posture).
+        heading_axis: the root sensor's axis that points forward in the pose (the body's
+            heading at calibration), or None to use ``heading_rad``.
+        heading_rad: the body's heading [rad from world x] when ``heading_axis`` is None.
+        heading_refine: refine the heading from the first elbow flexion after the
+            calibration (:mod:`mocapkit.teleop.heading`; needs ``humerus`` and ``radius``
+            segments and ``heading_axis``), then recalibrate and reindex.
+    """
+
+    preset: str = "right_arm_2"
+    sensor_ids: tuple[tuple[str, int], ...] | None = None
+    robot: str = "robonaut2-right"
+    retarget: Literal["segments", "map"] = "segments"
+    fusion: Literal["node", "host"] = "node"
+    filter_name: str = "miller"
+    rate_hz: float = 100.0
+    use_mag: bool = True
+    still_start_s: float = 0.8
+    stale_after_s: float = 0.1
+    pose: str = "npose"
+    heading_axis: str | None = "x"
+    heading_rad: float = 0.0
+    heading_refine: bool = True
+
+    def __post_init__(self) -> None:
+        if self.retarget not in ("segments", "map"):
+            raise ConfigError(f"retarget: expected 'segments' or 'map', got {self.retarget!r}")
+        if self.fusion not in ("node", "host"):
+            raise ConfigError(f"fusion: expected 'node' or 'host', got {self.fusion!r}")
+        for name in ("rate_hz", "stale_after_s"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"{name}: expected a positive number, got {getattr(self, name)}")
 
 
-@dataclass
-class OrientationSample:
-    """Minimal sample (what the suit receiver delivers, orientation part)."""
+@dataclass(slots=True)
+class Frame:
+    """What one processed batch did (kept for evaluation and recording).
 
-    sensor_id: int
-    t_arrival_ns: int
-    quat: FloatArray | None
-
-
-@dataclass
-class FrameLog:
-    """What happened for one packet (for evaluation and recording)."""
+    Attributes:
+        t: session time (``time.monotonic()``) [s].
+        t_sensor: the newest contributing sample's sensor time [s].
+        state: the session state after the tick.
+        command: the pose sent (4, 4) or None.
+        T_model: the intermediate model's end effector (4, 4) or None.
+        q_robot: the retargeted robot joints (n,) [rad] or None.
+        angles: the human joint angles (K,) [rad] or None.
+        latency_ns: arrival of the oldest contributing sample -> command sent, or None.
+        notes: limit notes and faults.
+    """
 
     t: float
-    q: FloatArray | None
+    t_sensor: float
+    state: State
+    command: FloatArray | None
     T_model: FloatArray | None
-    out: TickOutput
+    q_robot: FloatArray | None
+    angles: FloatArray | None
     latency_ns: int | None
+    notes: list[str] = field(default_factory=list)
 
 
 @dataclass
-class SensorWatchdog:
-    """Marks required sensors stale after ``stale_after_s`` without a valid sample."""
-
-    required: tuple[int, ...]
-    stale_after_s: float = 0.1
-    last_valid_s: dict[int, float] = field(default_factory=dict)
-    bad: dict[int, str] = field(default_factory=dict)
-
-    def update(self, sensor_id: int, t: float, quat: Any) -> None:
-        if quat is None:
-            return
-        q = np.asarray(quat, dtype=float)
-        if q.shape != (4,) or not np.isfinite(q).all() or abs(np.linalg.norm(q) - 1) > 0.05:
-            self.bad[sensor_id] = f"sensor {sensor_id}: invalid orientation {q.tolist()}"
-            return
-        self.bad.pop(sensor_id, None)
-        self.last_valid_s[sensor_id] = t
-
-    def fault(self, now: float) -> str | None:
-        """The reason the data cannot be used now, or None."""
-        for sid in self.required:
-            if sid in self.bad:
-                return self.bad[sid]
-            last = self.last_valid_s.get(sid)
-            if last is None:
-                return f"sensor {sid}: no data yet"
-            if now - last > self.stale_after_s:
-                return f"sensor {sid}: stale for {now - last:.2f} s (dropout?)"
-        return None
+class _Calibration:
+    t0: float
+    t1: float
+    times: list[list[float]]
+    quats: list[list[FloatArray]]
+    done: Callable[[BodyCalibration | None, str | None], None] | None = None
 
 
-class ArmTeleop:
+class TeleopPipeline:
     """See the module docstring.
 
     Args:
-        model: the intermediate kinematic model (robot arm in the chest frame).
-        retargeter: segment -> joint mapping for ``model``.
-        sensor_segments: sensor id -> segment name (e.g. ``{1: "humerus_r", 2: "radius_r"}``).
-        session: the teleoperation session.
-        link: the robot link (None: compute only, e.g. in benchmarks of the host side).
-        root_sensor: sensor id on the chest (heading), or None.
-        R_world_chest: the chest frame in the world when there is no root sensor (3, 3).
+        config: :class:`PipelineConfig`.
+        session: the session state machine.
+        link: the robot link (None: compute only, e.g. a benchmark of the host side).
     """
 
     def __init__(
-        self,
-        model: ArmModel,
-        retargeter: SegmentRetargeter,
-        sensor_segments: Mapping[int, str],
-        session: TeleopSession,
-        link: RobotLink | None = None,
-        root_sensor: int | None = None,
-        R_world_chest: Any = None,
-        stale_after_s: float = 0.1,
+        self, config: PipelineConfig, session: TeleopSession, link: RobotLink | None = None
     ) -> None:
-        self.model = model
-        self.retargeter = retargeter
-        self.sensor_segments = dict(sensor_segments)
-        missing = set(retargeter.segments) - set(self.sensor_segments.values())
-        if missing:
-            raise DataError(
-                f"sensor_segments: no sensor for segment(s) {', '.join(sorted(missing))}"
-            )
+        self.config = c = config
         self.session = session
         self.link = link
-        self.root_sensor = root_sensor
-        self.R_world_chest = np.eye(3) if R_world_chest is None else np.asarray(R_world_chest)
-        required = tuple(self.sensor_segments) + ((root_sensor,) if root_sensor else ())
-        self.watchdog = SensorWatchdog(required, stale_after_s)
-        self.latest: dict[int, FloatArray] = {}
-        self._R_chestsensor_chest: FloatArray | None = None
-        self.frames: list[FrameLog] = []
-        self.keep_frames = True
-
-    def _R_world_chest_now(self) -> FloatArray:
-        if self.root_sensor is None or self._R_chestsensor_chest is None:
-            return self.R_world_chest
-        return quat_to_matrix(self.latest[self.root_sensor]) @ self._R_chestsensor_chest
-
-    def calibrate(self, q_world_sensor: Mapping[int, Any]) -> None:
-        """The operator stands in the initialisation posture: store the reference."""
-        for sid in self.watchdog.required:
-            if sid not in q_world_sensor:
-                raise DataError(f"calibrate: no orientation for sensor {sid}")
-        self.latest = {k: np.asarray(v, dtype=float) for k, v in q_world_sensor.items()}
-        if self.root_sensor is not None:
-            R_ws = quat_to_matrix(self.latest[self.root_sensor])
-            self._R_chestsensor_chest = R_ws.T @ self.R_world_chest
-        self.retargeter.calibrate(self._segments())
-
-    def _segments(self) -> dict[str, FloatArray]:
-        Rc = self._R_world_chest_now()
-        return {
-            seg: Rc.T @ quat_to_matrix(self.latest[sid])
-            for sid, seg in self.sensor_segments.items()
-        }
-
-    def model_pose(self) -> tuple[FloatArray | None, FloatArray | None]:
-        """(q, T_chest_ee) of the intermediate model from the latest orientations."""
-        res = self.retargeter.joint_angles(self._segments())
-        return res.q, self.model.fk(res.q)
-
-    def process(self, samples: Iterable[SampleLike], now: float | None = None) -> FrameLog:
-        """Handle the samples of one packet; send the session's output to the robot."""
-        t_arrival: int | None = None
-        t = time.monotonic() if now is None else now
-        for s in samples:
-            t_arrival = s.t_arrival_ns if t_arrival is None else min(t_arrival, s.t_arrival_ns)
-            self.watchdog.update(s.sensor_id, t, s.quat)
-            valid = (
-                s.sensor_id in self.watchdog.last_valid_s and s.sensor_id not in self.watchdog.bad
-            )
-            if valid and s.quat is not None:
-                self.latest[s.sensor_id] = np.asarray(s.quat, dtype=float)
-        fault = self.watchdog.fault(t)
-        q = T = None
-        if fault is None:
-            q, T = self.model_pose()
-        robot_pose = age = gate = reason = None
-        if self.link is not None:
-            self.link.poll()
-            robot_pose = self.link.robot_pose()
-            age = self.link.report_age(t)
-            if self.link.latest is not None:
-                gate, reason = self.link.latest.gate, self.link.latest.reason
-        out = self.session.tick(
-            t, T, robot_pose, np.inf if age is None else age, fault, gate, reason
+        self.tree = tree = SensorTree.preset(c.preset)
+        names = tree.sensor_names
+        ids = (
+            dict(c.sensor_ids)
+            if c.sensor_ids is not None
+            else {n: i + 1 for i, n in enumerate(names)}
         )
+        unknown = sorted(set(ids) - set(names))
+        missing = [n for n in names if n not in ids]
+        if unknown or missing:
+            raise ConfigError(
+                f"sensor_ids: tree {tree.name!r} has sensors {', '.join(names)}; "
+                f"unknown {unknown or 'none'}, without an ID {missing or 'none'}"
+            )
+        self.sensor_ids = ids
+        self._slot_of_id = {ids[n]: i for i, n in enumerate(names)}
+        self._label = [f"sensor {n} (id {ids[n]})" for n in names]
+        n_s = len(names)
+        self.q_sensor = np.full((n_s, 4), np.nan)
+        """(S, 4) latest valid ``q_world_sensor`` per sensor (tree order)."""
+        self.t_valid = np.full(n_s, -np.inf)
+        self.bad: dict[int, str] = {}
+        self.fusion: dict[int, StillStartFilter] = {}
+        make_filter(c.filter_name, c.rate_hz)  # fail early on a bad name
+        self.arm = robot_arm(c.robot)
+        self._chest_index = (
+            tree.segment_names.index(CHEST_SEGMENT) if CHEST_SEGMENT in tree.segment_names else -1
+        )
+        self._setup_retarget()
+        self.body: BodyStream | None = None
+        self.calibration: BodyCalibration | None = None
+        self._calib: _Calibration | None = None
+        self._calib_data: tuple[dict[str, OrientationSeries], tuple[float, float]] | None = None
+        self._hinge: HingeHeading | None = None
+        self.heading_correction_rad: float | None = None
+        self._R_world_chest = np.eye(3)
+        self._R_seg = np.empty((len(self._rt_segments), 3, 3))
+        self._angles_ext = np.zeros(len(tree.coordinate_names) + len(self._map_extra))
+        self.q_robot: FloatArray | None = None
+        self.angles: FloatArray | None = None
+        self.T_model: FloatArray | None = None
+        self.clipped: tuple[str, ...] = ()
+        self.latencies_ns = np.zeros(_LATENCY_CAPACITY, dtype=np.int64)
+        self.n_latencies = 0
+        self.frames: list[Frame] = []
+        self.keep_frames = False
+        self.on_frame: Callable[[Frame], None] | None = None
+        self.last_fault: str | None = "not calibrated"
+        self._t_sensor = math.nan
+        _warm_up()
+        if self.retargeter is not None:  # compile/load its kernel now
+            self.retargeter.solve(np.tile(np.eye(3), (len(self._rt_segments), 1, 1)))
+            self.retargeter.reset()
+        if c.fusion == "host":
+            make_filter(c.filter_name, c.rate_hz).update([0.0, 0.0, 0.0], [0.0, 0.0, 9.81])
+
+    # -- setup ------------------------------------------------------------------------------
+    def _setup_retarget(self) -> None:
+        c, tree, arm = self.config, self.tree, self.arm
+        self._map_extra: list[str] = []
+        if c.retarget == "segments":
+            side = {"robonaut2-right": "right", "robonaut2-left": "left"}.get(c.robot)
+            if side is None:
+                raise ConfigError(
+                    f"retarget 'segments' (eq. 16 along the robot's own axes) is set up for "
+                    f"Robonaut 2; for {c.robot!r} use retarget='map' (its YAML joint map)"
+                )
+            groups = [g for g in robonaut2_groups(side) if g.segment in tree.segment_names]
+            if not groups or groups[0].segment != f"humerus_{side[0]}":
+                raise ConfigError(
+                    f"tree {tree.name!r} has no humerus_{side[0]} segment for the {side} arm"
+                )
+            groups = [g for g in groups if g.parent is None or g.parent in tree.segment_names]
+            self.retargeter: SegmentRetargeter | None = SegmentRetargeter(
+                arm, groups, robonaut2_init_posture(side)
+            )
+            self._rt_segments = self.retargeter.segments
+            self._rt_index = np.array(
+                [tree.segment_names.index(s) for s in self._rt_segments], dtype=np.int64
+            )
+            # the segments in the chest frame at the calibration pose: what the suit's
+            # initialisation posture means for the robot (q_init)
+            q_g = compose_pose(tree, pose_coordinates(tree, c.pose))
+            R_g = quat_to_matrix(q_g)
+            R_chest_g = (
+                np.eye(3) if self._chest_index < 0 else R_g[self._chest_index].T
+            )  # ground -> chest segment at the pose
+            self.retargeter.calibrate(
+                {
+                    s: CHEST_IN_SEGMENT.T @ R_chest_g @ R_g[i]
+                    for s, i in zip(self._rt_segments, self._rt_index, strict=True)
+                }
+            )
+            self.compiled_map = None
+        else:
+            self.retargeter = None
+            self._rt_segments = ()
+            self._rt_index = np.zeros(0, dtype=np.int64)
+            rmap = packaged_map(c.robot)
+            self._map_extra = [h for h in rmap.human_names if h not in tree.coordinate_names]
+            self.compiled_map = rmap.compile(arm, [*tree.coordinate_names, *self._map_extra])
+            if self._map_extra:
+                log.info(
+                    "map: %s not measured by tree %s, held at 0 (neutral)",
+                    ", ".join(self._map_extra),
+                    tree.name,
+                )
+
+    # -- calibration ------------------------------------------------------------------------
+    def start_calibration(
+        self,
+        now: float,
+        duration_s: float,
+        done: Callable[[BodyCalibration | None, str | None], None] | None = None,
+    ) -> None:
+        """Collect ``duration_s`` of orientations from ``now`` (the operator holds the pose),
+        then calibrate the body model; ``done(calibration, error)`` is called at the end.
+        The session holds meanwhile (no model pose)."""
+        n = len(self.tree.sensor_names)
+        self._calib = _Calibration(
+            now, now + duration_s, [[] for _ in range(n)], [[] for _ in range(n)], done
+        )
+        log.info("calibration: hold the %s pose for %.1f s", self.config.pose, duration_s)
+
+    @property
+    def calibrating(self) -> bool:
+        return self._calib is not None
+
+    def _finish_calibration(self) -> None:
+        cal = self._calib
+        assert cal is not None
+        self._calib = None
+        series = {}
+        error = None
+        calib = None
+        try:
+            for i, name in enumerate(self.tree.sensor_names):
+                t = np.array(cal.times[i])
+                if len(t) < 2:
+                    raise MocapkitError(
+                        f"calibration: {self._label[i]} sent {len(t)} samples in "
+                        f"{cal.t1 - cal.t0:.1f} s; is it on and streaming?"
+                    )
+                keep = np.concatenate([[True], np.diff(t) > 0])
+                series[name] = OrientationSeries(t[keep], np.array(cal.quats[i])[keep], name=name)
+            c = self.config
+            root_sensor = self.tree.segments[0].sensor
+            heading: HeadingFixed | HeadingFromSensor = (
+                HeadingFixed(c.heading_rad)
+                if c.heading_axis is None
+                else HeadingFromSensor(root_sensor, c.heading_axis)
+            )
+            calib = calibrate_pose(
+                self.tree, series, (cal.t0, cal.t1), pose=c.pose, heading=heading
+            )
+        except MocapkitError as exc:
+            error = str(exc)
+            log.warning("calibration failed: %s", error)
+        if calib is not None:
+            self.set_calibration(calib)
+            self._calib_data = (series, (cal.t0, cal.t1))
+            c = self.config
+            segs = self.tree.segment_names
+            if c.heading_refine and c.heading_axis is not None:
+                for sfx in ("_r", "_l"):
+                    if f"humerus{sfx}" in segs and f"radius{sfx}" in segs:
+                        self._hinge = HingeHeading(self.tree, f"humerus{sfx}", f"radius{sfx}")
+                        break
+        if cal.done is not None:
+            cal.done(calib, error)
+
+    def _refine_heading(self, correction: float, now: float) -> None:
+        """Recalibrate from the same pose window with the corrected heading; reindex."""
+        assert self.calibration is not None
+        assert self._calib_data is not None
+        series, window = self._calib_data
+        psi = self.calibration.heading_rad + correction
+        try:
+            calib = calibrate_pose(
+                self.tree, series, window, pose=self.config.pose, heading=HeadingFixed(psi)
+            )
+        except MocapkitError as exc:  # the same data calibrated before: not expected
+            log.warning("heading refinement failed: %s", exc)
+            return
+        self.heading_correction_rad = correction
+        log.info("heading refined from the elbow flexion by %.1f deg", math.degrees(correction))
+        self.set_calibration(calib)
+        self.session.reindex(now)
+
+    def set_calibration(self, calib: BodyCalibration) -> None:
+        """Use a body calibration (from :meth:`start_calibration`, or a saved one)."""
+        self._hinge = None
+        self.calibration = calib
+        self.body = BodyStream(self.tree, calib, dropout="hold", max_hold_s=0.5)
+        self.body.update_array(np.tile([1.0, 0.0, 0.0, 0.0], (len(self.tree.segments), 1)), 0.0)
+        self.body.reset()  # (that frame compiled or loaded the kernel)
+        self._R_world_chest = quat_to_matrix(calib.q_world_ground) @ CHEST_IN_SEGMENT
+        if self.retargeter is not None:
+            self.retargeter.reset()
+        log.info("calibrated: heading %.1f deg", math.degrees(calib.heading_rad))
+
+    # -- per batch ------------------------------------------------------------------------------
+    def _sample_quat(self, slot: int, s: Any) -> Any:
+        if s.kind is Kind.RAW:
+            if self.config.fusion != "host" or s.gyr is None or s.acc is None:
+                return None
+            f = self.fusion.get(slot)
+            if f is None:
+                c = self.config
+                inner = make_filter(c.filter_name, c.rate_hz)
+                f = self.fusion[slot] = StillStartFilter(
+                    inner, c.still_start_s, label=self._label[slot]
+                )
+            mag = s.mag if self.config.use_mag else None
+            return f.update(s.gyr, s.acc, mag)
+        return s.quat
+
+    def ingest(self, samples: Sequence[Any], now: float) -> int | None:
+        """Take a batch's samples in; returns the oldest contributing arrival [ns] or None."""
+        oldest: int | None = None
+        cal = self._calib
+        for s in samples:
+            slot = self._slot_of_id.get(s.sensor_id)
+            if slot is None:
+                continue
+            try:
+                q = self._sample_quat(slot, s)
+            except MocapkitError as exc:
+                self.bad[slot] = f"{self._label[slot]}: host fusion failed ({exc})"
+                continue
+            if q is None:
+                continue
+            w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
+            n2 = w * w + x * x + y * y + z * z
+            if not (abs(n2 - 1.0) < 0.1):  # also False for NaN
+                self.bad[slot] = (
+                    f"{self._label[slot]}: invalid orientation [{w:.3g}, {x:.3g}, {y:.3g}, {z:.3g}]"
+                )
+                continue
+            if slot in self.bad:
+                del self.bad[slot]
+            qs = self.q_sensor[slot]
+            qs[0], qs[1], qs[2], qs[3] = w, x, y, z
+            self.t_valid[slot] = now
+            if not s.t_sensor_s <= self._t_sensor:
+                self._t_sensor = s.t_sensor_s
+            if oldest is None or s.t_arrival_ns < oldest:
+                oldest = s.t_arrival_ns
+            if cal is not None and cal.t0 <= now:
+                cal.times[slot].append(now)
+                cal.quats[slot].append(qs.copy())
+        if cal is not None and now >= cal.t1:
+            self._finish_calibration()
+        return oldest
+
+    def sensor_fault(self, now: float) -> str | None:
+        """Why the sensor data cannot be used now, or None."""
+        if self.bad:
+            return next(iter(self.bad.values()))
+        stale = now - self.t_valid
+        worst = int(np.argmax(stale))
+        if stale[worst] > self.config.stale_after_s:
+            if not np.isfinite(stale[worst]):
+                return f"{self._label[worst]}: no data yet"
+            return f"{self._label[worst]}: no data for {stale[worst]:.2f} s (dropout?)"
+        return None
+
+    def model_pose(self, now: float) -> tuple[FloatArray | None, str | None]:
+        """The intermediate model's ``T_chest_ee`` from the latest orientations, or a fault."""
+        if self.body is None:
+            return None, "calibrating" if self._calib is not None else "not calibrated"
+        fault = self.sensor_fault(now)
+        if fault is not None:
+            return None, fault
+        body = self.body
+        angles = body.update_array(self.q_sensor, now)
+        self.angles = angles
+        if self._hinge is not None:
+            correction = self._hinge.update(body.q_world_segment)
+            if correction is not None:
+                self._refine_heading(correction, now)
+        if self.retargeter is not None:
+            R_seg = self._R_seg
+            ok = _kernels.segments_in_chest(
+                body.q_world_segment, self._rt_index, self._chest_index,
+                self._R_world_chest, CHEST_IN_SEGMENT, R_seg,
+            )  # fmt: skip
+            if not ok:
+                return None, "body model: a segment's orientation is unknown"
+            q = self.retargeter.solve(R_seg)
+            clipped = self.retargeter.clipped
+        else:
+            assert self.compiled_map is not None
+            ext = self._angles_ext
+            ext[: len(angles)] = angles
+            if not np.isfinite(angles).all():
+                return None, f"body model: {', '.join(body.invalid_coordinates())} unknown"
+            q, clipped = self.compiled_map.apply(ext)
+        self.q_robot = q
+        self.clipped = (
+            tuple(self.arm.joint_names[i] for i in np.flatnonzero(clipped)) if clipped.any() else ()
+        )
+        T = self.arm.fk(q)
+        self.T_model = T
+        return T, None
+
+    def _tick(self, now: float, model: bool) -> TickOutput:
+        """Run the session with the model pose (``model``) or without (a watchdog tick)."""
+        link = self.link
+        robot_pose = gate = reason = None
+        age = math.inf
+        if link is not None:
+            robot_pose = link.robot_pose()
+            age = link.report_age(now)
+            if link.latest is not None:
+                gate, reason = link.latest.gate, link.latest.reason
+        T: FloatArray | None = None
+        fault: str | None
+        if model:
+            T, fault = self.model_pose(now)
+        elif self.body is None:
+            fault = "calibrating" if self._calib is not None else "not calibrated"
+        else:
+            fault = self.sensor_fault(now)
+            T = self.T_model if fault is None else None
+        self.last_fault = fault
+        return self.session.tick(now, T, robot_pose, age, fault, gate, reason)
+
+    def process(
+        self, samples: Sequence[Any], now_ns: int | None = None, now: float | None = None
+    ) -> Frame | None:
+        """One drained batch (possibly empty: a watchdog tick); see the module docstring.
+        ``now`` is the session clock [s] (default ``time.monotonic()``; tests set it)."""
+        now = time.monotonic() if now is None else now
+        if self.link is not None:
+            self.link.poll()  # reports (and keep the socket drained) on every tick
+        oldest = self.ingest(samples, now) if samples else None
+        if oldest is None:
+            # no new data: only the watchdogs, so a dropout holds the robot at once
+            session = self.session
+            if not session.hold_pending:
+                if session.state in (State.DISABLED, State.HELD):
+                    return None
+                if self.body is not None and self.sensor_fault(now) is None:
+                    return None
+            out = self._tick(now, model=False)
+            out.command = None  # nothing new: never resend
+        else:
+            out = self._tick(now, model=True)
         latency = None
         if self.link is not None:
             if out.command is not None:
                 self.link.send_command(out.command)
             elif out.hold:
                 self.link.send_hold()
-        if t_arrival is not None and (out.command is not None or self.link is None):
-            latency = time.perf_counter_ns() - t_arrival
-        frame = FrameLog(t, q, T, out, latency)
+        if oldest is not None and out.command is not None:
+            latency = time.perf_counter_ns() - oldest
+            self.latencies_ns[self.n_latencies % _LATENCY_CAPACITY] = latency
+            self.n_latencies += 1
+        if oldest is not None and self.clipped:
+            out.notes.append(f"joint limit: {', '.join(self.clipped)} clipped")
+        if oldest is None and out.command is None and not out.hold and not out.notes:
+            return None
+        frame = Frame(
+            now,
+            self._t_sensor,
+            out.state,
+            out.command,
+            None if oldest is None else self.T_model,
+            None if (oldest is None or self.q_robot is None) else self.q_robot.copy(),
+            None if (oldest is None or self.angles is None) else self.angles.copy(),
+            latency,
+            out.notes,
+        )
         if self.keep_frames:
             self.frames.append(frame)
+        if self.on_frame is not None:
+            self.on_frame(frame)
         return frame
+
+    def latency_ms(self) -> FloatArray:
+        """Recorded pipeline times [ms] (the last 131072 commands at most)."""
+        n = min(self.n_latencies, _LATENCY_CAPACITY)
+        return self.latencies_ns[:n] / 1e6
+
+
+_WARM = False
+
+
+def _warm_up() -> None:
+    """Compile (or load from cache) every numba kernel of the per-packet path now, not on
+    the first packet after engaging (a first compile takes seconds)."""
+    global _WARM
+    if _WARM:
+        return
+
+    T = np.eye(4)
+    out = np.empty((4, 4))
+    _kernels.apply_offset(T, np.eye(3), np.zeros(3), out)
+    _kernels.pose_error(T, out)
+    _kernels.limit_command(out, T, -np.ones(3), np.ones(3), 0.1, 0.1, True)
+    _kernels.mat_to_quat(T, np.empty(4))
+    q = np.array([[1.0, 0.0, 0.0, 0.0]])
+    _kernels.segments_in_chest(
+        q, np.zeros(1, np.int64), 0, np.eye(3), np.eye(3), np.empty((1, 3, 3))
+    )
+    _kernels.relative_rotvec(q[0], q[0], q[0], np.empty(4), np.empty(3))
+    _kernels.pose_from_parts(np.zeros(3), q[0], np.empty((4, 4)))
+    _WARM = True

@@ -1,9 +1,13 @@
 """Recording of a teleoperated motion (MCAP) and autonomous looping playback.
 
 Channels (JSON messages, JSON schemas, so Foxglove can plot them):
-``/teleop/command`` ``{t, pos, quat}``, ``/teleop/report`` ``{t, pos, quat, gate, reason}``,
-``/teleop/transition`` ``{t, from, to, reason}``. Times [s] on the session's clock;
-``log_time`` is the same in ns.
+``/teleop/command`` ``{t, pos, quat}`` (the full end-effector pose sent, chest frame),
+``/teleop/report`` ``{t, pos, quat, gate, reason, q}`` (the robot's actual pose and joints),
+``/teleop/joints`` ``{t, names, values}`` (the human joint angles and the intermediate
+model's robot joints [rad], per command), ``/teleop/transition`` ``{t, from, to, reason}``.
+Times [s] on the session's clock; ``log_time`` is the same in ns. With ``threaded=True``
+the JSON encoding and the writing happen on a writer thread: the caller (the receiver
+thread, in a live session) only queues.
 
 Playback (Miller et al., section 5: recorded motions that begin and end near the same
 configuration were looped autonomously): :func:`loop_trajectory` measures the seam
@@ -16,6 +20,8 @@ otherwise the motion plays once.
 from __future__ import annotations
 
 import json
+import queue
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,6 +40,14 @@ _POSE_SCHEMA = {
         "quat": {"type": "array", "items": {"type": "number"}},
     },
 }
+_JOINTS_SCHEMA = {
+    "type": "object",
+    "properties": {
+        "t": {"type": "number"},
+        "names": {"type": "array", "items": {"type": "string"}},
+        "values": {"type": "array", "items": {"type": "number"}},
+    },
+}
 _TRANSITION_SCHEMA = {
     "type": "object",
     "properties": {k: {"type": "string"} for k in ("from", "to", "reason")}
@@ -42,9 +56,14 @@ _TRANSITION_SCHEMA = {
 
 
 class TeleopRecorder:
-    """Write a session to an MCAP file; use as a context manager."""
+    """Write a session to an MCAP file; use as a context manager.
 
-    def __init__(self, path: str | Path) -> None:
+    Args:
+        path: the output file.
+        threaded: encode and write on a writer thread (the callers only queue).
+    """
+
+    def __init__(self, path: str | Path, threaded: bool = False) -> None:
         from mcap.writer import Writer
 
         self._file = open(path, "wb")  # noqa: SIM115 (closed in close())
@@ -56,33 +75,63 @@ class TeleopRecorder:
         tr = self._w.register_schema(
             "mocapkit.teleop.Transition", "jsonschema", json.dumps(_TRANSITION_SCHEMA).encode()
         )
+        joints = self._w.register_schema(
+            "mocapkit.teleop.Joints", "jsonschema", json.dumps(_JOINTS_SCHEMA).encode()
+        )
         self._ch = {
             "command": self._w.register_channel("/teleop/command", "json", pose),
             "report": self._w.register_channel("/teleop/report", "json", pose),
+            "joints": self._w.register_channel("/teleop/joints", "json", joints),
             "transition": self._w.register_channel("/teleop/transition", "json", tr),
         }
+        self._queue: queue.SimpleQueue[tuple[str, float, dict[str, Any]] | None] | None = None
+        self._thread: threading.Thread | None = None
+        if threaded:
+            self._queue = queue.SimpleQueue()
+            self._thread = threading.Thread(target=self._drain, name="teleop-recorder", daemon=True)
+            self._thread.start()
 
-    def _write(self, channel: str, t: float, msg: dict[str, Any]) -> None:
+    def _drain(self) -> None:
+        assert self._queue is not None
+        while (item := self._queue.get()) is not None:
+            self._encode(*item)
+
+    def _encode(self, channel: str, t: float, msg: dict[str, Any]) -> None:
         ns = max(0, int(t * 1e9))
         self._w.add_message(self._ch[channel], ns, json.dumps(msg).encode(), ns)
+
+    def _write(self, channel: str, t: float, msg: dict[str, Any]) -> None:
+        if self._queue is not None:
+            self._queue.put((channel, t, msg))
+        else:
+            self._encode(channel, t, msg)
 
     def command(self, t: float, pos: Any, quat: Any) -> None:
         self._write(
             "command", t, {"t": t, "pos": list(map(float, pos)), "quat": list(map(float, quat))}
         )
 
-    def report(self, t: float, pos: Any, quat: Any, gate: str = "", reason: str = "") -> None:
+    def report(
+        self, t: float, pos: Any, quat: Any, gate: str = "", reason: str = "", q: Any = ()
+    ) -> None:
         self._write(
             "report",
             t,
             {"t": t, "pos": list(map(float, pos)), "quat": list(map(float, quat)), "gate": gate,
-             "reason": reason},
+             "reason": reason, "q": list(map(float, q))},
         )  # fmt: skip
+
+    def joints(self, t: float, names: Any, values: Any) -> None:
+        self._write("joints", t, {"t": t, "names": list(names), "values": list(map(float, values))})
 
     def transition(self, t: float, source: str, target: str, reason: str) -> None:
         self._write("transition", t, {"t": t, "from": source, "to": target, "reason": reason})
 
     def close(self) -> None:
+        if self._queue is not None and self._thread is not None:
+            self._queue.put(None)
+            self._thread.join()
+            self._queue = None
         self._w.finish()
         self._file.close()
 
@@ -102,30 +151,36 @@ class Trajectory:
     quat: FloatArray
 
 
-def read_commands(path: str | Path) -> Trajectory:
-    """The ``/teleop/command`` channel of a recording."""
+def read_messages(path: str | Path, topic: str) -> list[dict[str, Any]]:
+    """Every JSON message on ``topic`` (e.g. ``/teleop/report``), in log order."""
     from mcap.reader import make_reader
 
-    t, pos, quat = [], [], []
+    out: list[dict[str, Any]] = []
     try:
         with open(path, "rb") as f:
-            for _schema, channel, message in make_reader(f).iter_messages(
-                topics=["/teleop/command"]
-            ):
-                del channel
-                m = json.loads(message.data)
-                t.append(m["t"])
-                pos.append(m["pos"])
-                quat.append(m["quat"])
+            for _schema, _channel, message in make_reader(f).iter_messages(topics=[topic]):
+                out.append(json.loads(message.data))
     except (ValueError, KeyError, json.JSONDecodeError) as exc:
         raise FileFormatError(f"{path}: not a mocapkit teleop MCAP recording ({exc})") from exc
     except Exception as exc:  # mcap raises its own error types for corrupt files
         if type(exc).__module__.startswith("mcap"):
             raise FileFormatError(f"{path}: not a valid MCAP file ({exc})") from exc
         raise
+    return out
+
+
+def read_commands(path: str | Path) -> Trajectory:
+    """The ``/teleop/command`` channel of a recording (time from its first command)."""
+    msgs = read_messages(path, "/teleop/command")
+    try:
+        t = [m["t"] for m in msgs]
+        pos = [m["pos"] for m in msgs]
+        quat = [m["quat"] for m in msgs]
+    except KeyError as exc:
+        raise FileFormatError(f"{path}: /teleop/command message without {exc}") from exc
     if len(t) < 2:
         raise DataError(f"{path}: needs at least 2 commands on /teleop/command, found {len(t)}")
-    return Trajectory(np.array(t) - t[0], np.array(pos), np.array(quat))
+    return Trajectory(np.array(t) - t[0], np.array(pos, dtype=float), np.array(quat, dtype=float))
 
 
 @dataclass(frozen=True)

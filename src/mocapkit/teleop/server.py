@@ -284,6 +284,11 @@ def config_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--gate-deg", type=float, default=float(np.degrees(d.gate_rot_rad)))
     parser.add_argument("--command-timeout-s", type=float, default=d.command_timeout_s)
     parser.add_argument("--velocity-scale", type=float, default=d.velocity_scale)
+    parser.add_argument(
+        "--q-start-deg",
+        default=None,
+        help="initial joints, comma-separated degrees (default: the arm's ready posture)",
+    )
     parser.add_argument("--max-seconds", type=float, default=None, help="stop after this long")
 
 
@@ -297,7 +302,20 @@ def config_from_args(args: argparse.Namespace) -> ServerConfig:
         gate_rot_rad=float(np.radians(args.gate_deg)),
         command_timeout_s=args.command_timeout_s,
         velocity_scale=args.velocity_scale,
+        q_start=_q_start(args.q_start_deg),
     )
+
+
+def _q_start(text: str | None) -> tuple[float, ...] | None:
+    if text is None:
+        return None
+    try:
+        return tuple(float(np.radians(float(v))) for v in text.split(","))
+    except ValueError as exc:
+        raise ConfigError(
+            f"--q-start-deg: expected comma-separated degrees like 10,-80,90,-60,-90,0,0, "
+            f"got {text!r}"
+        ) from exc
 
 
 def run_from_args(args: argparse.Namespace, parent_pid: int | None = None) -> int:
@@ -360,10 +378,15 @@ class RobotServerProcess:
 
 
 def spawn_robot_server(
-    config: ServerConfig | None = None, max_seconds: float = 600.0, ready_timeout_s: float = 30.0
+    config: ServerConfig | None = None,
+    max_seconds: float = 600.0,
+    ready_timeout_s: float = 30.0,
+    nice: int = 0,
 ) -> RobotServerProcess:
     """Start ``python -m mocapkit.teleop.server`` on a free loopback port and wait until it
-    is ready. The process exits by itself after ``max_seconds`` or if we die."""
+    is ready. The process exits by itself after ``max_seconds`` or if we die. ``nice``
+    lowers its scheduling priority (the evaluation runs it at 10: it stands in for the
+    robot's own computer, and on a shared machine must not preempt the host pipeline)."""
     c = config or ServerConfig()
     argv = [
         sys.executable,
@@ -389,10 +412,21 @@ def spawn_robot_server(
         str(c.velocity_scale),
         "--max-seconds",
         str(max_seconds),
+        *(
+            ["--q-start-deg", ",".join(str(float(np.degrees(v))) for v in c.q_start)]
+            if c.q_start is not None
+            else []
+        ),
         "--parent-pid",
         str(os.getpid()),
     ]
-    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, text=True)
+
+    def lower_priority() -> None:  # pragma: no cover (runs in the child)
+        os.nice(nice)
+
+    proc = subprocess.Popen(
+        argv, stdout=subprocess.PIPE, text=True, preexec_fn=lower_priority if nice else None
+    )
     assert proc.stdout is not None
     ready, _, _ = select.select([proc.stdout], [], [], ready_timeout_s)
     line = proc.stdout.readline() if ready else ""

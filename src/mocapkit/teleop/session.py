@@ -24,8 +24,7 @@ import numpy as np
 
 from mocapkit._validate import FloatArray
 from mocapkit.errors import ConfigError
-from mocapkit.geometry import quat_from_matrix, quat_slerp, quat_to_matrix
-from mocapkit.robot.model import pose_distance, rotation_angle
+from mocapkit.teleop import _kernels
 from mocapkit.teleop import protocol as proto
 
 log = logging.getLogger("mocapkit.teleop.session")
@@ -52,6 +51,9 @@ class SessionConfig:
         link_timeout_s: no robot report for this long -> held.
         workspace_min, workspace_max: box for the commanded position [m].
         max_speed_m_s, max_rot_speed_rad_s: end-effector command speed limits.
+        unreachable_follow_m: while the server reports the target out of reach, stay
+            engaged (the robot holds its closest pose and follows again when the target
+            comes back) as long as it is at most this far [m]; beyond, disengage.
     """
 
     mode: Literal["relative", "absolute"] = "relative"
@@ -65,6 +67,7 @@ class SessionConfig:
     workspace_max: tuple[float, float, float] = (1.0, 1.0, 0.7)
     max_speed_m_s: float = 1.5
     max_rot_speed_rad_s: float = 4.0
+    unreachable_follow_m: float = 0.3
 
     def __post_init__(self) -> None:
         if self.mode not in ("relative", "absolute"):
@@ -123,6 +126,12 @@ class TeleopSession:
         self._last_t: float | None = None
         self._far_since: float | None = None
         self._last_notes: set[str] = set()
+        self._hold_pending = False
+        self._lost = False  # disengaged because the robot could not follow
+        self._short = False  # following a target out of the robot's reach
+        self._lo = np.asarray(self.config.workspace_min, dtype=np.float64)
+        self._hi = np.asarray(self.config.workspace_max, dtype=np.float64)
+        self._prev = np.eye(4)
 
     # -- operator events -------------------------------------------------------------------
     def _go(self, t: float, target: State, reason: str) -> None:
@@ -145,15 +154,20 @@ class TeleopSession:
         """Start (from disabled): align, reindexing first in relative mode."""
         if self.state == State.DISABLED:
             self._reindex_pending = self.config.mode == "relative"
+            self._lost = False
             self._go(t, State.ALIGNING, "operator engaged")
 
-    def disable(self, t: float) -> None:
-        self._go(t, State.DISABLED, "operator disabled")
+    def disable(self, t: float, reason: str = "operator disabled") -> None:
+        """Stop (any state): the next tick sends a HOLD, then nothing until engage()."""
+        if self.state != State.DISABLED:
+            self._hold_pending = True
+        self._go(t, State.DISABLED, reason)
 
     def clutch(self, pressed: bool, t: float) -> None:
         """Operator's clutch: pressed -> the robot holds; released -> reindex, re-engage."""
         self._clutch = pressed
         if pressed and self.state in (State.ENGAGED, State.ALIGNING):
+            self._hold_pending = True
             self._go(t, State.CLUTCHED, "clutch pressed")
         elif not pressed and self.state == State.CLUTCHED:
             self._reindex_pending = True
@@ -164,15 +178,19 @@ class TeleopSession:
         self._reindex_pending = True
         log.info("reindex requested", extra={"event": "reindex", "t": t})
 
+    @property
+    def hold_pending(self) -> bool:
+        """A HOLD is due at the next tick (after disable or clutch)."""
+        return self._hold_pending
+
     # -- the tick --------------------------------------------------------------------------
     def offset(self) -> tuple[FloatArray, FloatArray]:
         """Current reindexing offset (dp (3,) [m], dR (3, 3))."""
         return self._dp.copy(), self._dR.copy()
 
     def apply_offset(self, T_model: FloatArray) -> FloatArray:
-        T = np.eye(4)
-        T[:3, :3] = T_model[:3, :3] @ self._dR
-        T[:3, 3] = T_model[:3, 3] + self._dp
+        T = np.empty((4, 4))
+        _kernels.apply_offset(T_model, self._dR, self._dp, T)
         return T
 
     def tick(
@@ -199,7 +217,7 @@ class TeleopSession:
         dt = 0.0 if self._last_t is None else max(0.0, t - self._last_t)
         self._last_t = t
         if T_model is not None:
-            T_model = np.asarray(T_model, dtype=float)
+            T_model = np.asarray(T_model, dtype=np.float64)
             if not np.isfinite(T_model).all():
                 model_fault = model_fault or "model pose is not finite"
                 T_model = None
@@ -213,51 +231,81 @@ class TeleopSession:
                 else f"robot server silent for {robot_age_s:.2f} s"
             )
         fault = model_fault or link_fault
+        hold = self._hold_pending
+        self._hold_pending = False
         if self.state == State.DISABLED:
-            return TickOutput(self.state)
+            return TickOutput(self.state, hold=hold)
         if fault is not None:
             if self.state != State.HELD:
                 self.fault = fault
                 self._go(t, State.HELD, fault)
                 self._last_sent = None
                 return TickOutput(self.state, hold=True, notes=[fault])
-            return TickOutput(self.state, notes=[fault])
+            return TickOutput(self.state, hold=hold, notes=[fault])
         assert T_model is not None
         assert robot_pose is not None
-        robot = np.asarray(robot_pose, dtype=float)
+        robot = np.asarray(robot_pose, dtype=np.float64)
         if self.state == State.HELD:
             self.fault = None
             self._reindex_pending = self._reindex_pending or c.mode == "relative"
             self._go(t, State.CLUTCHED if self._clutch else State.ALIGNING, "fault cleared")
         if self.state == State.CLUTCHED:
-            return TickOutput(self.state)
+            return TickOutput(self.state, hold=hold)
         if self._reindex_pending:
             self._dp = robot[:3, 3] - T_model[:3, 3]
-            self._dR = T_model[:3, :3].T @ robot[:3, :3]
+            self._dR = np.ascontiguousarray(T_model[:3, :3].T @ robot[:3, :3])
             self._reindex_pending = False
             self._last_sent = None
             log.info("reindexed", extra={"event": "reindex", "t": t, "dp": self._dp.tolist()})
         cmd = self.apply_offset(T_model)
         notes = self._limit(cmd, dt)
-        dp, dr = pose_distance(cmd, robot)
+        dp, dr = _kernels.pose_error(cmd, robot)
         if self.state == State.ALIGNING:
             if dp <= c.engage_pos_m and dr <= c.engage_rot_rad:
                 self._go(t, State.ENGAGED, f"aligned within {dp * 1e3:.0f} mm, "
                          f"{np.degrees(dr):.1f} deg")  # fmt: skip
+            elif (
+                self._lost
+                and c.mode == "relative"
+                and dp <= c.disengage_pos_m
+                and dr <= c.disengage_rot_rad
+            ):
+                # the target came back near where the robot stopped: take up the rest
+                # by reindexing (no jump) and follow again
+                self._lost = False
+                self._dp = robot[:3, 3] - T_model[:3, 3]
+                self._dR = np.ascontiguousarray(T_model[:3, :3].T @ robot[:3, :3])
+                self._last_sent = None
+                cmd = self.apply_offset(T_model)
+                self._go(t, State.ENGAGED, f"target back within {dp * 1e3:.0f} mm: reindexed")
+                dp, dr = 0.0, 0.0
             else:
-                return TickOutput(self.state, notes=notes)
+                return TickOutput(self.state, hold=hold, notes=notes)
         # engaged
         far = dp > c.disengage_pos_m or dr > c.disengage_rot_rad
-        if far:
+        short = robot_reason == proto.Reason.UNREACHABLE and dp <= c.unreachable_follow_m
+        if far and short:
+            # the server's IK holds the arm at its closest to a target out of its reach:
+            # safe to keep commanding; it follows again when the target comes back
+            note = "target out of reach: the robot follows as close as it can (server: UNREACHABLE)"
+            if not self._short:
+                log.info(note, extra={"event": "limit"})
+            self._short = True
+            notes = [*notes, note]
+            self._far_since = None
+        elif far:
             self._far_since = t if self._far_since is None else self._far_since
             if t - self._far_since >= c.disengage_after_s:
                 why = f"robot cannot follow: {dp * 1e3:.0f} mm, {np.degrees(dr):.0f} deg away"
                 if robot_reason is not None and robot_reason != proto.Reason.OK:
                     why += f" (server: {robot_reason.name})"
+                self._lost = True
                 self._go(t, State.ALIGNING, why)
                 return TickOutput(self.state, hold=True, notes=[*notes, why])
         else:
             self._far_since = None
+        if not far:
+            self._short = False
         if (
             robot_gate is not None
             and robot_gate != proto.Gate.SYNCED
@@ -273,28 +321,29 @@ class TeleopSession:
     def _limit(self, cmd: FloatArray, dt: float) -> list[str]:
         """Workspace box and end-effector speed limits, in place; returns notes."""
         c = self.config
-        notes: list[str] = []
-        lo, hi = np.asarray(c.workspace_min), np.asarray(c.workspace_max)
-        clipped = np.clip(cmd[:3, 3], lo, hi)
-        if not np.array_equal(clipped, cmd[:3, 3]):
-            notes.append("workspace limit: command clamped to the box")
-            cmd[:3, 3] = clipped
         prev = self._last_sent
-        if prev is not None and dt > 0:
-            step = cmd[:3, 3] - prev[:3, 3]
-            max_step = c.max_speed_m_s * dt
-            n = float(np.linalg.norm(step))
-            if n > max_step:
-                cmd[:3, 3] = prev[:3, 3] + step * (max_step / n)
-                notes.append("speed limit: command slowed")
-            ang = rotation_angle(prev[:3, :3], cmd[:3, :3])
-            max_ang = c.max_rot_speed_rad_s * dt
-            if ang > max_ang:
-                qa, qb = quat_from_matrix(prev[:3, :3]), quat_from_matrix(cmd[:3, :3])
-                cmd[:3, :3] = quat_to_matrix(quat_slerp(qa, qb, max_ang / ang))
-                notes.append("rotation speed limit: command slowed")
+        have_prev = prev is not None and dt > 0
+        flags = _kernels.limit_command(
+            cmd,
+            prev if prev is not None else self._prev,
+            self._lo,
+            self._hi,
+            c.max_speed_m_s * dt,
+            c.max_rot_speed_rad_s * dt,
+            have_prev,
+        )
+        if not flags and not self._last_notes:
+            return []
+        notes = [note for bit, note in _LIMIT_NOTES if flags & bit]
         new = set(notes) - self._last_notes
         for note in new:
             log.info(note, extra={"event": "limit"})
         self._last_notes = set(notes)
         return notes
+
+
+_LIMIT_NOTES = (
+    (1, "workspace limit: command clamped to the box"),
+    (2, "speed limit: command slowed"),
+    (4, "rotation speed limit: command slowed"),
+)

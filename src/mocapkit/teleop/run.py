@@ -1,0 +1,130 @@
+"""``mocapkit teleop run``: a live session from a suit stream, with operator controls.
+
+:func:`run_live` starts the robot server (or uses a running one), the
+:class:`~mocapkit.teleop.live.LiveSession` on the suit's UDP port, the control socket and
+the keyboard, runs scheduled commands (``[(t, "calibrate"), (t, "engage")]``, seconds from
+the start: scripted sessions and tests), and returns a summary when the time is up or
+the operator quits.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+from mocapkit.errors import ConfigError
+from mocapkit.teleop.control import Controls, ControlSocket, read_keys
+from mocapkit.teleop.live import LiveConfig, LiveSession
+from mocapkit.teleop.server import RobotServerProcess, ServerConfig, spawn_robot_server
+
+log = logging.getLogger("mocapkit.teleop.run")
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How a live run is set up.
+
+    Attributes:
+        server: robot server ``(host, port)``, or None to start one (``spawn``).
+        spawn: the settings of the robot server to start when ``server`` is None.
+        seconds: end after this long (None: until ``quit``).
+        commands: scheduled operator commands ``(t [s from the start], command)``.
+        control_port: UDP control socket port on loopback (None: no socket, 0: any).
+        keys: a text stream of commands, one per line (the terminal), or None.
+        record: an MCAP file for the session.
+    """
+
+    server: tuple[str, int] | None = None
+    spawn: ServerConfig | None = None
+    seconds: float | None = None
+    commands: tuple[tuple[float, str], ...] = ()
+    control_port: int | None = None
+    keys: IO[str] | None = None
+    record: Path | None = None
+
+
+def parse_commands(text: str) -> tuple[tuple[float, str], ...]:
+    """``"1.0:calibrate,3.5:engage"`` -> ((1.0, "calibrate"), (3.5, "engage"))."""
+    out = []
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        t, sep, cmd = part.partition(":")
+        try:
+            when = float(t)
+        except ValueError:
+            when = float("nan")
+        if not sep or not cmd or not when >= 0:
+            raise ConfigError(
+                f"commands: expected 'seconds:command' items like '1.0:calibrate,3.5:engage', "
+                f"got {part!r}"
+            )
+        out.append((when, cmd.strip()))
+    return tuple(sorted(out))
+
+
+@contextlib.contextmanager
+def _robot(options: RunOptions, config: LiveConfig) -> Iterator[tuple[str, int]]:
+    if options.server is not None:
+        yield options.server
+        return
+    cfg = options.spawn or ServerConfig(robot=config.pipeline.robot)
+    srv: RobotServerProcess = spawn_robot_server(cfg, max_seconds=(options.seconds or 86400) + 60)
+    with srv:
+        yield srv.address
+
+
+def run_live(
+    config: LiveConfig,
+    options: RunOptions,
+    on_start: Callable[[LiveSession], None] | None = None,
+) -> dict[str, Any]:
+    """Run a live session (see the module docstring); returns the final summary:
+    the snapshot plus ``pipeline_ms_p50/p99`` over the whole run and every transition."""
+    done = threading.Event()
+    with _robot(options, config) as address, LiveSession(config, address, options.record) as live:
+        controls = Controls(live, done.set)
+        log.info("suit stream expected on UDP port %d", live.suit_port)
+        with contextlib.ExitStack() as stack:
+            if options.control_port is not None:
+                sock = stack.enter_context(ControlSocket(controls, port=options.control_port))
+                log.info("control socket on UDP 127.0.0.1:%d", sock.port)
+            if options.keys is not None:
+                threading.Thread(
+                    target=read_keys, args=(controls, options.keys, done), daemon=True
+                ).start()
+            if on_start is not None:
+                on_start(live)
+            start = time.monotonic()
+            pending = list(options.commands)
+            while not done.is_set():
+                now = time.monotonic() - start
+                while pending and pending[0][0] <= now:
+                    _, cmd = pending.pop(0)
+                    reply = controls.apply(cmd)
+                    log.info("scheduled %s: %s", cmd, reply)
+                if options.seconds is not None and now >= options.seconds:
+                    break
+                wait = 0.1 if not pending else min(0.1, max(0.0, pending[0][0] - now))
+                done.wait(wait)
+        summary = live.snapshot()
+        lat = live.pipeline.latency_ms()
+        summary["pipeline_ms_p50"] = float(_percentile(lat, 50))
+        summary["pipeline_ms_p99"] = float(_percentile(lat, 99))
+        summary["commands_sent"] = int(live.pipeline.n_latencies)
+        summary["transitions"] = [
+            {"t": tr.t, "from": tr.source.value, "to": tr.target.value, "reason": tr.reason}
+            for tr in live.session.transitions
+        ]
+    return summary
+
+
+def _percentile(values: Sequence[float] | Any, q: float) -> float:
+    import numpy as np
+
+    a = np.asarray(values, dtype=float)
+    return float(np.percentile(a, q)) if a.size else float("nan")
