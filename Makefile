@@ -31,8 +31,11 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
+# Tests against the clock (live processes, sockets, a browser) run serially after the
+# rest, so they never compete with each other for the two cores.
 pytest: $(STAMP)
-	HYPOTHESIS_PROFILE=ci $(BIN)/python -m pytest -n $(PYTEST_WORKERS) -q
+	HYPOTHESIS_PROFILE=ci $(BIN)/python -m pytest -n $(PYTEST_WORKERS) -q -m "not realtime"
+	HYPOTHESIS_PROFILE=ci $(BIN)/python -m pytest -q -m realtime
 
 test: lint typecheck pytest
 

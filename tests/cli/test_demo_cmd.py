@@ -12,6 +12,9 @@ from mocapkit.io.broad import bundled_demo_trial
 from mocapkit.io.foxglove_mcap import read_foxglove_mcap
 from mocapkit.io.joint_angles_mot import read_joint_angles_mot
 
+# runs live processes and sockets against the clock: run serially (see Makefile)
+pytestmark = pytest.mark.realtime
+
 
 def test_bundled_recording_is_a_real_broad_crop() -> None:
     trial = bundled_demo_trial()

@@ -16,6 +16,9 @@ from mocapkit.imu.filters import available_filters
 from mocapkit.suit.radio import radio_rate_markdown
 from mocapkit.suit.recording import read_frames
 
+# runs live processes and sockets against the clock: run serially (see Makefile)
+pytestmark = pytest.mark.realtime
+
 
 def _free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:

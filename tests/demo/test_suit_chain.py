@@ -14,6 +14,9 @@ from mocapkit.errors import ConfigError, DataError
 from mocapkit.geometry import quat_angle_between
 from mocapkit.imu.filters import available_filters
 
+# runs live processes and sockets against the clock: run serially (see Makefile)
+pytestmark = pytest.mark.realtime
+
 
 def test_operator_cycle_repeats_and_the_sensors_ride_their_segments() -> None:
     c = operator_cycle(("vertical", "circle"), shape_s=2.0, repeat_until_s=30.0)

@@ -17,6 +17,9 @@ from mocapkit.suit.receiver import Receiver
 from mocapkit.suit.recording import paced
 from mocapkit.suit.transport import UdpTransport
 
+# runs live processes and sockets against the clock: run serially (see Makefile)
+pytestmark = pytest.mark.realtime
+
 
 @pytest.mark.shared_data
 def test_full_body_15_imu_recording_over_the_suit(shared_data: Path) -> None:

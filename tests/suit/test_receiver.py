@@ -27,6 +27,9 @@ from mocapkit.suit.protocol import (
 from mocapkit.suit.receiver import Receiver, ReceiverConfig
 from mocapkit.suit.transport import Frame, UdpTransport
 
+# runs live processes and sockets against the clock: run serially (see Makefile)
+pytestmark = pytest.mark.realtime
+
 _OPEN: list[UdpTransport] = []
 
 

@@ -23,6 +23,9 @@ from mocapkit.teleop.recording import read_messages
 from mocapkit.teleop.sender import TimelineSender
 from mocapkit.teleop.server import ServerConfig, spawn_robot_server
 
+# runs live processes and sockets against the clock: run serially (see Makefile)
+pytestmark = pytest.mark.realtime
+
 IDS = {"upper_arm_r": 1, "forearm_r": 2}
 
 

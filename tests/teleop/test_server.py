@@ -12,6 +12,9 @@ from mocapkit.teleop import protocol as proto
 from mocapkit.teleop.link import RobotLink
 from mocapkit.teleop.server import RobotSim, ServerConfig, spawn_robot_server
 
+# runs live processes and sockets against the clock: run serially (see Makefile)
+pytestmark = pytest.mark.realtime
+
 
 def test_protocol_round_trip_and_errors():
     pos, quat = np.array([0.1, -0.2, 0.3]), np.array([1.0, 0.0, 0.0, 0.0])

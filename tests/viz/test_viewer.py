@@ -13,6 +13,9 @@ from mocapkit.viz.geometry import arm_points, polyline_segments
 from mocapkit.viz.live_api import LiveSession, LiveSnapshot, SegmentPose, SensorPose
 from tests.viz.browser import free_port
 
+# runs live processes and sockets against the clock: run serially (see Makefile)
+pytestmark = pytest.mark.realtime
+
 viser = pytest.importorskip("viser", reason="the viewer needs the viz extra")
 
 from mocapkit.viz.viewer import TeleopViewer, import_viser  # noqa: E402

@@ -19,6 +19,9 @@ pytest.importorskip("viser", reason="the viewer needs the viz extra (pip install
 
 from mocapkit.viz.viewer import ROBOT_RGB, SKELETON_RGB, TeleopViewer
 
+# runs live processes and sockets against the clock: run serially (see Makefile)
+pytestmark = pytest.mark.realtime
+
 __all__ = ["chromium"]  # the fixture, imported for pytest
 
 
