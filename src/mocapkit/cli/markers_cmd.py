@@ -164,6 +164,13 @@ def register(subparsers: Any) -> None:
         default=None,
         help="a .mot to compare joint angles with (e.g. OpenSim's IK)",
     )
+    rep.add_argument(
+        "--reference-model",
+        choices=("auto", "gait2392", "rajagopal"),
+        default="auto",
+        help="whose sign conventions the reference uses (gait2392: knee flexion negative; "
+        "auto: told from the knee columns); default auto",
+    )
     rep.add_argument("--json", action="store_true", help="print the report's figures")
     rep.set_defaults(func=_report)
     ins = sub.add_parser(
@@ -223,7 +230,9 @@ def _report(args: argparse.Namespace) -> int:
     from mocapkit.viz.marker_report import write_report
 
     result, _subject, _cleaning = _run(args)
-    summary = write_report(result, args.output, reference=args.reference)
+    summary = write_report(
+        result, args.output, reference=args.reference, reference_model=args.reference_model
+    )
     if args.json:
         print_json(summary)
     else:

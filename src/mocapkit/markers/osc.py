@@ -26,6 +26,8 @@ from mocapkit._validate import FloatArray
 from mocapkit.body.human_model import HumanModel
 from mocapkit.errors import ConfigError, DataError
 from mocapkit.markers import rigid_fast
+from mocapkit.markers.coordinates import resolve_coordinate_tasks
+from mocapkit.markers.determined import dof_marker_table
 from mocapkit.markers.kinematics import MarkerKinematics
 from mocapkit.markers.osc_kernels import osc_frame, osc_trial
 from mocapkit.markers.prioritized import DEFAULT_DAMPING
@@ -78,6 +80,8 @@ class ControlProblem:
     flat: rigid_fast.FlatModel
     level_ptr: np.ndarray
     level_markers: np.ndarray
+    dof_ptr: np.ndarray
+    dof_markers: np.ndarray
     lock_dof: np.ndarray
     lock_value: FloatArray
     lower: FloatArray
@@ -105,12 +109,16 @@ def control_problem(
                 raise ConfigError(f"level marker {n!r} is not tracked; tracked: {', '.join(names)}")
             members.append(index[n])
         ptr.append(len(members))
-    lock_dof = np.array([human.dof_index(c) + 1 for c in coordinate_tasks], dtype=np.int64)
-    lock_value = np.array([v for v, _ in coordinate_tasks.values()], dtype=float)
+    tasks, _ = resolve_coordinate_tasks(human, coordinate_tasks)
+    lock_dof = np.array([human.dof_index(c) + 1 for c in tasks], dtype=np.int64)
+    lock_value = np.array([v for v, _ in tasks.values()], dtype=float)
+    dof_ptr, dof_markers = dof_marker_table(human, names, {names[i] for i in members})
     return ControlProblem(
         rigid_fast.flatten(human.model, kin.frame_ids),
         np.array(ptr, dtype=np.int64),
         np.array(members, dtype=np.int64),
+        dof_ptr,
+        dof_markers,
         lock_dof,
         lock_value,
         np.asarray(human.model.lowerPositionLimit, dtype=float).copy(),
@@ -191,8 +199,8 @@ class DirectMarkerController:
         fm, pb = self.problem.flat, self.problem
         args = (
             self.q, self.v, x0, x1, xd, xdd, pb.row_weight, pb.level_ptr, pb.level_markers,
-            pb.lock_dof, pb.lock_value, pb.lower, pb.upper, pb.q_posture, self.gains, dt,
-            self.params.substeps,
+            pb.dof_ptr, pb.dof_markers, pb.lock_dof, pb.lock_value, pb.lower, pb.upper,
+            pb.q_posture, self.gains, dt, self.params.substeps,
         )  # fmt: skip
         if self._reference is not None:
             q, v, P, dq, err = self._reference.frame(*args)
@@ -270,8 +278,8 @@ def reconstruct_offline(
     Q, P, DQ, E = osc_trial(
         fm.parent, fm.R0, fm.p0, fm.axis, fm.mass, fm.com, fm.inertia, fm.gravity,
         fm.marker_joint, fm.marker_offset, q0, X, Xd, Xdd, pb.row_weight, pb.level_ptr,
-        pb.level_markers, pb.lock_dof, pb.lock_value, pb.lower, pb.upper,
-        pb.q_posture, p.gains(rate_hz), 1.0 / rate_hz, p.substeps,
+        pb.level_markers, pb.dof_ptr, pb.dof_markers, pb.lock_dof, pb.lock_value, pb.lower,
+        pb.upper, pb.q_posture, p.gains(rate_hz), 1.0 / rate_hz, p.substeps,
     )  # fmt: skip
     if not np.isfinite(Q).all():
         bad = int(np.flatnonzero(~np.isfinite(Q).all(axis=1))[0])

@@ -81,17 +81,25 @@ class ReferenceStepper:
         self.model = human.model
         self.data = self.model.createData()
 
+    @staticmethod
     def _lock_rows(
-        self, q: FloatArray, v: FloatArray, lock_dof: Any, lock_value: Any, lo: Any, hi: Any
-    ) -> tuple[list[int], list[float]]:
+        q: FloatArray, v: FloatArray, lock_dof: Any, lock_value: Any, lo: Any, hi: Any,
+        determined: np.ndarray, push: FloatArray,
+    ) -> tuple[list[int], list[float]]:  # fmt: skip
+        """Held q indices and targets: coordinate tasks, undetermined DOFs (at their angle),
+        joints at a limit that move or are pushed outward (see the kernel's ``_lock_rows``)."""
         rows, target = list(map(int, lock_dof)), list(map(float, lock_value))
         for iq in range(7, q.shape[0]):
             if iq in rows:
                 continue
-            if q[iq] <= lo[iq] + 1e-9 and v[iq - 1] <= 0.0:
+            iv = iq - 1
+            if not determined[iq - 7]:
+                rows.append(iq)
+                target.append(float(q[iq]))
+            elif q[iq] <= lo[iq] + 1e-9 and (v[iv] < 0 or (v[iv] == 0 and push[iv] <= 0)):
                 rows.append(iq)
                 target.append(float(lo[iq]))
-            elif q[iq] >= hi[iq] - 1e-9 and v[iq - 1] >= 0.0:
+            elif q[iq] >= hi[iq] - 1e-9 and (v[iv] > 0 or (v[iv] == 0 and push[iv] >= 0)):
                 rows.append(iq)
                 target.append(float(hi[iq]))
         return rows, target
@@ -107,6 +115,8 @@ class ReferenceStepper:
         row_weight: FloatArray,
         level_ptr: Any,
         level_markers: Any,
+        dof_ptr: Any,
+        dof_markers: Any,
         lock_dof: Any,
         lock_value: Any,
         lower: FloatArray,
@@ -121,7 +131,9 @@ class ReferenceStepper:
         nv, M = model.nv, len(x1)
         dt = dt_frame / n_sub
         tracked = np.isfinite(x0[:, 0]) | np.isfinite(x1[:, 0])
-        order = [int(m) for m in level_markers if tracked[m]]
+        determined = np.array(
+            [tracked[dof_markers[dof_ptr[k] : dof_ptr[k + 1]]].any() for k in range(nv - 6)]
+        )
         q, v = q.copy(), v.copy()
         dq = np.zeros(nv)
         for j in range(n_sub):
@@ -130,14 +142,11 @@ class ReferenceStepper:
             h = pin.nonLinearEffects(model, data, q, v).copy()
             P, J = self.kin.reference_positions_jacobians(q)
             B = self.kin.reference_bias(q, v)
-            rows, target = self._lock_rows(q, v, lock_dof, lock_value, lower, upper)
-            J_rows, acc, bias, ptr, dx = [], [], [], [0, len(rows)], []
-            for iq, tgt in zip(rows, target, strict=True):
-                e = np.zeros(nv)
-                e[iq - 1] = 1.0
-                J_rows.append(e)
-                acc.append(kpl * (tgt - q[iq]) - kdl * v[iq - 1])
-                bias.append(0.0)
+            Jm: list[FloatArray] = []
+            accm: list[float] = []
+            biasm: list[float] = []
+            dx: list[float] = []
+            mptr = []
             for lv in range(len(level_ptr) - 1):
                 for k in range(level_ptr[lv], level_ptr[lv + 1]):
                     m = int(level_markers[k])
@@ -150,16 +159,27 @@ class ReferenceStepper:
                         xdes, vdes, ades = x1[m], np.zeros(3), np.zeros(3)
                     sw = np.sqrt(row_weight[m])
                     a_task = ades + kd * (vdes - J[m] @ v) + kp * (xdes - P[m])
-                    J_rows += list(sw * J[m])
-                    acc += list(sw * a_task)
-                    bias += list(sw * B[m])
+                    Jm += list(sw * J[m])
+                    accm += list(sw * a_task)
+                    biasm += list(sw * B[m])
                     dx += list(sw * (xdes - P[m]))
-                ptr.append(len(acc))
+                mptr.append(len(accm))
+            Jmat = np.array(Jm).reshape(-1, nv)
+            push = Jmat.T @ (np.array(accm) - np.array(biasm)) if accm else np.zeros(nv)
+            rows, target = self._lock_rows(
+                q, v, lock_dof, lock_value, lower, upper, determined, push
+            )
+            lock_J = np.zeros((len(rows), nv))
+            lock_acc = []
+            for c, (iq, tgt) in enumerate(zip(rows, target, strict=True)):
+                lock_J[c, iq - 1] = 1.0
+                lock_acc.append(kpl * (tgt - q[iq]) - kdl * v[iq - 1])
+            ptr = [0, len(rows), *(len(rows) + p for p in mptr)]
             a_post = -kdp * v
             a_post[6:] += kpp * (q_posture[7:] - q[7:])
             Gamma, Jbar = prioritized_torque_reference(
-                Amat, h, np.array(J_rows).reshape(-1, nv), np.array(acc), np.array(bias),
-                ptr, a_post, damping,
+                Amat, h, np.vstack([lock_J, Jmat]), np.array(lock_acc + accm),
+                np.array([0.0] * len(rows) + biasm), ptr, a_post, damping,
             )  # fmt: skip
             if dx:
                 dq = Jbar[:, len(rows) :] @ np.array(dx)  # eq. 15, the last step's errors
@@ -174,5 +194,4 @@ class ReferenceStepper:
         err = np.full(M, np.nan)
         vis = np.isfinite(x1[:, 0])
         err[vis] = np.linalg.norm(x1[vis] - P[vis], axis=1)
-        del order
         return q, v, P, dq, err

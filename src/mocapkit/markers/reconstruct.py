@@ -22,11 +22,14 @@ from mocapkit.body.markersets import MarkerSet, guess_markerset, load_markerset
 from mocapkit.body.scaling import Subject, scale_from_static
 from mocapkit.errors import ConfigError, DataError
 from mocapkit.markers import conventions
+from mocapkit.markers.bounds import joint_error_bounds
 from mocapkit.markers.cleaning import CleaningReport, fill_gaps, lowpass
+from mocapkit.markers.coordinates import resolve_coordinate_tasks
+from mocapkit.markers.determined import dof_determined
 from mocapkit.markers.grouping import make_levels
 from mocapkit.markers.ik import IKParams, initial_root_pose, solve_ik
 from mocapkit.markers.osc import DirectMarkerController, OSCParams, reconstruct_offline
-from mocapkit.markers.result import ReconstructionResult, joint_error_bounds
+from mocapkit.markers.result import ReconstructionResult
 from mocapkit.markers.trajectories import MarkerTrajectories
 
 log = logging.getLogger(__name__)
@@ -177,11 +180,19 @@ def prepare(
 def estimate_height(traj: MarkerTrajectories) -> float:
     """Stature [m] ~ median vertical extent of the markers (z-up): the head markers sit about
     a marker radius above the vertex, the foot markers about as far above the floor."""
-    with np.errstate(invalid="ignore"):
-        z = traj.positions[..., 2]
-        extent = np.nanmax(z, axis=1) - np.nanmin(z, axis=1)
-    h = float(np.nanmedian(extent))
     from mocapkit.body.anthropometry import HEIGHT_RANGE_M
+
+    z = traj.positions[..., 2]
+    seen = np.isfinite(z).sum(axis=1) >= 2  # frames with a vertical extent at all
+    if not seen.any():
+        raise DataError(
+            "cannot estimate the stature: no frame shows two markers at once; pass --height-m"
+        )
+    zs = z[seen]
+    extent = np.max(np.where(np.isfinite(zs), zs, -np.inf), axis=1) - np.min(
+        np.where(np.isfinite(zs), zs, np.inf), axis=1
+    )
+    h = float(np.median(extent))
 
     if not (HEIGHT_RANGE_M[0] <= h <= HEIGHT_RANGE_M[1]):
         raise DataError(
@@ -290,6 +301,9 @@ def reconstruct(
     """Joint angles for a prepared trial (metres, z-up, set names)."""
     warn = _Warnings(warnings or [])
     human, ms = subject.human, subject.markerset
+    tasks, notes = resolve_coordinate_tasks(human, ms.coordinate_tasks)
+    for note in notes:
+        log.info("%s", note)
     names = [n for n in trial.names if n in human.markers]
     unregistered = set(subject.report.get("unregistered_markers", ()))
     X = np.ascontiguousarray(trial.select(names).positions)
@@ -315,17 +329,19 @@ def reconstruct(
     t0 = time.perf_counter()
     if options.method == "ik":
         sol = solve_ik(
-            human, names, X, weights, q_init, ms.coordinate_tasks, q_posture=human.neutral(),
+            human, names, X, weights, q_init, tasks, q_posture=human.neutral(),
             params=options.ik,
         )  # fmt: skip
         elapsed = time.perf_counter() - t0
         Q = sol.q
-        dq = joint_error_bounds(human, names, Q, X, weights, list(ms.coordinate_tasks))
+        tracked_w = np.where([n in set(tracked) for n in names], weights, 0.0)
+        _, det = dof_determined(human, names, tracked, X, held=tasks)
+        dq = joint_error_bounds(human, names, Q, X, tracked_w, ~det, list(tasks))
     else:
         wmap = dict(zip(names, weights, strict=True))
         if options.mode == "online":
             ctrl = DirectMarkerController(
-                human, names, levels, ms.coordinate_tasks, q_init, rate, human.neutral(),
+                human, names, levels, tasks, q_init, rate, human.neutral(),
                 options.osc, wmap,
             )  # fmt: skip
             frames = [ctrl.step(x) for x in X]
@@ -334,13 +350,13 @@ def reconstruct(
             dq = np.array([f.dq for f in frames])
         else:
             Q, _, dq, _ = reconstruct_offline(
-                human, names, X, rate, levels, ms.coordinate_tasks, q_init, human.neutral(),
+                human, names, X, rate, levels, tasks, q_init, human.neutral(),
                 options.osc, wmap,
             )  # fmt: skip
             elapsed = time.perf_counter() - t0
     result = ReconstructionResult.build(
         trial.time, human, names, tracked, X, Q, dq, elapsed, options.method, options.mode,
-        [list(level) for level in levels], ms.coordinate_tasks, warn,
+        [list(level) for level in levels], tasks, warn, weights,
     )  # fmt: skip
     if unregistered & set(tracked):
         warn.add(
