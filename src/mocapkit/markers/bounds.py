@@ -10,14 +10,20 @@ nearly singular pose divides by a vanishing singular value. So:
 1. Only determined coordinates (:mod:`mocapkit.markers.determined`): direct marker control
    holds the others (they get no share of ``Jbar``); their bound is NaN, not zero ("no
    marker says anything" is not "no error").
-2. Capped at the joint's range: the reconstructed and the true angle both lie within the
-   model's limits, so they cannot differ by more; capped entries are counted.
-3. Reported with the conditioning: per frame and determined DOF i the sensitivity
-   ``s_i = sqrt([(Jᵀ W J)⁻¹]_ii)`` (J: the visible tracked markers' Jacobian over the
-   determined DOFs, W their weights), in degrees per millimetre of marker error: the
-   joint change that the least-squares fit makes for a 1 mm marker error. A DOF above
-   :data:`POORLY_DETERMINED_DEG_PER_MM` is named in a warning: its bound, however small,
-   rests on a poorly conditioned fit.
+2. Per reported coordinate (the OpenSim coordinates users read, some computed from several
+   model DOFs): ``Δc = G Δq`` with G the coordinates' Jacobian, so a split spine's
+   internal redistribution, which no marker sees and no output shows, does not count.
+3. Capped at the joint's range: the reconstructed and the true angle both lie within the
+   model's limits, so they cannot differ by more (180 deg for a computed angle); capped
+   entries are counted and reported.
+4. Reported with the conditioning: per frame and determined coordinate the sensitivity
+   ``s_k = sqrt(g_kᵀ (Jᵀ W J)⁻¹ g_k)`` (J: the visible tracked markers' Jacobian over the
+   determined, not held DOFs, W their weights, g_k the coordinate's gradient), in degrees
+   per millimetre of marker error: how far the least-squares fit moves the coordinate for
+   a 1 mm marker error. A coordinate above :data:`POORLY_DETERMINED_DEG_PER_MM` is named
+   in a warning: its bound, however small, rests on a poorly conditioned fit. A coordinate
+   whose gradient reaches a direction no visible marker sees (infinite sensitivity: one
+   head marker for four neck DOFs) is numerically undetermined: NaN, like rule 1.
 
 For a full-rank, well-conditioned frame ``Jbar_⊗ = J⁺`` whatever the inertia (the
 dynamically consistent inverse of a matrix with full column rank is its least-squares
@@ -35,6 +41,7 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.body.human_model import HumanModel
 from mocapkit.markers import rigid_fast
+from mocapkit.markers.coordinates import CoordinateMap, coordinates_from_q
 from mocapkit.markers.kinematics import MarkerKinematics
 
 # A DOF moving more than this per millimetre of marker error is poorly determined.
@@ -82,9 +89,35 @@ def joint_error_bounds(
         rows_dx = np.concatenate([np.zeros(len(rows)), dx])
         _, _, out[f] = prioritized_torque(
             A, LA, h, Jr, zeros, zeros, np.array([0, len(rows), len(Jr)]),
-            np.zeros(human.nv), rows_dx, True, DEFAULT_DAMPING,
+            np.zeros(human.nv), rows_dx, True, DEFAULT_DAMPING, True,
         )  # fmt: skip
     return out
+
+
+def coordinate_jacobian(human: HumanModel, cmap: CoordinateMap, Q: FloatArray) -> FloatArray:
+    """(N, K, nv) derivative of the reported coordinates (:mod:`mocapkit.markers.coordinates`)
+    with respect to the model's velocity coordinates, by central differences (step 1e-6:
+    the coordinates are smooth away from gimbal lock, where the derivative is rightly huge)."""
+    from mocapkit.markers.kinematics import integrate
+
+    eps = 1e-6
+    n, nv = Q.shape[0], human.nv
+    G = np.zeros((n, len(cmap.names), nv))
+    for k in range(nv):
+        if k >= 6:
+            up, down = Q.copy(), Q.copy()
+            up[:, k + 1] += eps
+            down[:, k + 1] -= eps
+        else:
+            dv = np.zeros(nv)
+            dv[k] = eps
+            up = np.array([integrate(human.model, q, dv) for q in Q])
+            down = np.array([integrate(human.model, q, -dv) for q in Q])
+        d = coordinates_from_q(human, up, cmap) - coordinates_from_q(human, down, cmap)
+        ang = cmap.angular
+        d[:, ang] = np.pi - np.mod(np.pi - d[:, ang], 2.0 * np.pi)  # across the +-pi seam
+        G[:, :, k] = d / (2.0 * eps)
+    return G
 
 
 @dataclass(frozen=True)
@@ -92,25 +125,33 @@ class BoundReport:
     """The bound of every frame and how far to trust it.
 
     Attributes:
-        dq: (N, nv) Δq [rad; root translation m]: NaN where not determined, capped at the
-            joint range.
-        capped: (N, nv) bool, entries that were capped.
-        sensitivity_deg_per_mm: (N, n_dof) per determined DOF (NaN elsewhere; inf where
-            the markers carry no information on it).
-        poorly_determined: {DOF: frames} over POORLY_DETERMINED_DEG_PER_MM.
+        dq: (N, nv) Δq of the model's DOFs [rad; root translation m]: NaN where not
+            determined, capped at the joint range.
+        dc: (N, K) the same for the reported coordinates (``G Δq``, G the coordinates'
+            Jacobian): NaN where not determined, capped at the joint range (direct DOFs) or
+            at 180 deg (angles computed from several DOFs).
+        capped: (N, K) bool, entries of ``dc`` that were capped.
+        sensitivity_deg_per_mm: (N, K) per determined rotational coordinate (NaN elsewhere;
+            inf where the markers carry no information on it).
+        poorly_determined: {coordinate: frames} over POORLY_DETERMINED_DEG_PER_MM (finite).
+        unobserved: (N, K) bool, coordinates some visible marker reaches structurally but
+            that move along a direction no visible marker sees (infinite sensitivity):
+            numerically undetermined; ``dc`` is NaN there.
     """
 
     dq: FloatArray
+    dc: FloatArray
     capped: np.ndarray
     sensitivity_deg_per_mm: FloatArray
     poorly_determined: dict[str, int]
+    unobserved: np.ndarray
 
     @property
     def worst_sensitivity_deg_per_mm(self) -> FloatArray:
-        """(N,) the least determined DOF of each frame [deg/mm] (NaN: nothing determined)."""
+        """(N,) the least determined coordinate of each frame [deg/mm] (NaN: none)."""
         s = self.sensitivity_deg_per_mm
         out = np.full(s.shape[0], np.nan)
-        has = np.isfinite(s) | np.isinf(s)
+        has = ~np.isnan(s)
         for f in np.flatnonzero(has.any(axis=1)):
             out[f] = np.max(s[f][has[f]])
         return out
@@ -122,35 +163,41 @@ def sensitivities(
     Q: FloatArray,
     X: FloatArray,
     weights: FloatArray,
-    root: np.ndarray,
-    dofs: np.ndarray,
+    free: np.ndarray,
+    G: FloatArray,
+    rows: np.ndarray,
 ) -> FloatArray:
-    """(N, n_dof) ``sqrt([(Jᵀ W J)⁻¹]_ii)`` [rad/m] over the determined DOFs (and the root
-    when determined) of each frame; NaN for undetermined DOFs, inf without information."""
+    """(N, K) ``sqrt(g_kᵀ (Jᵀ W J)⁻¹ g_k)`` [rad/m] for the coordinates ``rows`` (N, K) bool,
+    J over the model velocity columns ``free`` (N, nv) bool of each frame (the determined,
+    not held ones), g_k the coordinate's gradient (G: (N, K, nv)); NaN outside ``rows``, inf
+    when g_k reaches a direction the markers do not see."""
     kin = MarkerKinematics(human, names)
     fm = rigid_fast.flatten(human.model, kin.frame_ids)
     sw = np.sqrt(np.maximum(weights, 0.0))
-    n_dof = len(human.dof_names)
-    out = np.full((len(Q), n_dof), np.nan)
+    out = np.full(rows.shape, np.nan)
     for f, q in enumerate(Q):
-        cols = np.flatnonzero(dofs[f])
+        cols = np.flatnonzero(free[f])
         vis = np.isfinite(X[f, :, 0]) & (weights > 0)
-        if cols.size == 0 or not vis.any():
+        if cols.size == 0 or not vis.any() or not rows[f].any():
             continue
         R, t, S = rigid_fast.forward_kinematics(fm.parent, fm.R0, fm.p0, fm.axis, q)
         _, J = rigid_fast.marker_kinematics(fm.parent, R, t, S, fm.marker_joint, fm.marker_offset)
-        use = np.concatenate([np.arange(6), 6 + cols]) if root[f] else 6 + cols
-        Jw = (J[vis][:, :, use] * sw[vis, None, None]).reshape(-1, use.size)
+        Jw = (J[vis][:, :, cols] * sw[vis, None, None]).reshape(-1, cols.size)
         w, V = np.linalg.eigh(Jw.T @ Jw)
         good = w > _EIG_CUT * max(float(w.max()), 1e-300)
-        var = (V[:, good] ** 2) @ (1.0 / w[good])
-        var[(np.abs(V[:, ~good]) > 1e-6).any(axis=1)] = np.inf  # in a null direction
-        out[f, cols] = np.sqrt(var[-cols.size :])
+        g = G[f][:, cols][rows[f]]  # (k, c)
+        proj = g @ V  # (k, c) components along the eigenvectors
+        var = (proj[:, good] ** 2) @ (1.0 / w[good])
+        gnorm = np.linalg.norm(g, axis=1)
+        blind = (np.abs(proj[:, ~good]) > 1e-6 * np.maximum(gnorm, 1e-12)[:, None]).any(axis=1)
+        var[blind] = np.inf
+        out[f, rows[f]] = np.sqrt(var)
     return out
 
 
 def bound_report(
     human: HumanModel,
+    cmap: CoordinateMap,
     names: Sequence[str],
     Q: FloatArray,
     X: FloatArray,
@@ -158,18 +205,49 @@ def bound_report(
     dq: FloatArray,
     root: np.ndarray,
     dofs: np.ndarray,
+    held: Sequence[str] = (),
+    columns: np.ndarray | None = None,
 ) -> BoundReport:
-    """Apply rules 1-3 of the module docstring to a method's raw Δq (N, nv)."""
+    """Apply rules 1-3 of the module docstring to a method's raw Δq (N, nv): ``root``,
+    ``dofs`` from :func:`mocapkit.markers.determined.dof_determined`, ``held`` the
+    coordinate tasks' DOFs, ``columns`` (N, K) the determined reported coordinates."""
     out = np.array(dq, dtype=float, copy=True)
     out[~root, :6] = np.nan
     out[:, 6:][~dofs] = np.nan
     lo, hi = human.dof_limits()
     span = np.concatenate([np.full(6, np.inf), hi - lo])
     with np.errstate(invalid="ignore"):
-        capped = np.abs(out) > span
-    out = np.where(capped, np.sign(out) * span, out)
-    sens = np.degrees(sensitivities(human, names, Q, X, weights, root, dofs)) / 1000.0
+        capped_q = np.abs(out) > span
+    out = np.where(capped_q, np.sign(out) * span, out)
+    G = coordinate_jacobian(human, cmap, Q)
+    cols = np.ones((len(Q), len(cmap.names)), dtype=bool) if columns is None else columns
+    dc = np.einsum("nkv,nv->nk", G, np.nan_to_num(out))
+    dc[~cols] = np.nan
+    cspan = np.full(len(cmap.names), np.inf)
+    for k, (kind, a, _) in enumerate(cmap.source):
+        if kind == "dof":
+            cspan[k] = hi[a] - lo[a]
+        elif cmap.angular[k]:
+            cspan[k] = np.pi
     with np.errstate(invalid="ignore"):
-        poor = sens > POORLY_DETERMINED_DEG_PER_MM
-    counts = {d: int(poor[:, k].sum()) for k, d in enumerate(human.dof_names) if poor[:, k].any()}
-    return BoundReport(out, capped, sens, counts)
+        over = np.abs(dc) > cspan
+    dc = np.where(over, np.sign(dc) * cspan, dc)
+    # a coordinate is capped if it was, or if a model DOF it depends on was
+    capped = over | ((np.abs(G) > 1e-9) & capped_q[:, None, :]).any(axis=2)
+    capped &= cols
+    held_idx = [6 + human.dof_names.index(d) for d in held if d in human.dof_names]
+    free = np.concatenate([np.repeat(root[:, None], 6, axis=1), dofs], axis=1)
+    free[:, held_idx] = False
+    rows = cols & cmap.angular[None, :]
+    for k, (kind, a, _) in enumerate(cmap.source):
+        if kind == "dof" and (6 + a) in held_idx:
+            rows[:, k] = False  # held by a coordinate task: no marker fit behind it
+    sens = sensitivities(human, names, Q, X, weights, free, G, rows)
+    sens = np.degrees(sens) / 1000.0
+    unobserved = np.isinf(sens)
+    dc[unobserved] = np.nan
+    capped &= ~unobserved
+    with np.errstate(invalid="ignore"):
+        poor = (sens > POORLY_DETERMINED_DEG_PER_MM) & ~unobserved
+    counts = {c: int(poor[:, k].sum()) for k, c in enumerate(cmap.names) if poor[:, k].any()}
+    return BoundReport(out, dc, capped, sens, counts, unobserved)

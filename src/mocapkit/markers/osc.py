@@ -47,6 +47,20 @@ class OSCParams:
         posture_kp, posture_kd: posture task gains [1/s², 1/s].
         damping: relative damping of the least squares within a priority level (0: the
             paper's exact pseudo-inverses; see :mod:`mocapkit.markers.prioritized`).
+        max_speed: cap on each joint's (and the pelvis') angular speed [rad/s] and, as
+            ``max_speed / 4`` [m/s], on the pelvis' linear speed in the simulation: a
+            safety net above human motion (pitching peaks near 120 rad/s at the shoulder,
+            gait below 10) that stops the runaway a nearly singular set of markers can
+            start (walking2 with four visible markers diverged without it).
+        max_error_m: a marker's position error enters its commanded acceleration at most
+            this long [m] (direction kept): a marker far from the model is reached over a
+            few frames instead of in one leap that the linearisation cannot follow (the
+            bound, eq. 15, still sees the whole error). A safety net: markers that appear
+            are placed by ``reacquire`` first.
+        reacquire: when tracked markers appear (after a gap, or for the first time), fit
+            the pelvis and the DOFs carrying them to the visible markers before simulating
+            the frame (:func:`mocapkit.markers.osc_kernels.reacquire`); False: the paper's
+            pure simulation, which chases such markers over several frames.
         backend: ``"fast"`` (numba) or ``"reference"`` (Pinocchio + numpy).
     """
 
@@ -55,6 +69,9 @@ class OSCParams:
     posture_kp: float = 25.0
     posture_kd: float = 10.0
     damping: float = DEFAULT_DAMPING
+    max_speed: float = 150.0
+    max_error_m: float = 0.1
+    reacquire: bool = True
     backend: Backend = "fast"
 
     def __post_init__(self) -> None:
@@ -66,11 +83,16 @@ class OSCParams:
             raise ConfigError(f"backend: expected 'fast' or 'reference', got {self.backend!r}")
         if not (0.0 <= self.damping < 10.0):
             raise ConfigError(f"damping: expected 0 <= damping < 10, got {self.damping}")
+        if not (self.max_speed > 0.0):
+            raise ConfigError(f"max_speed: expected > 0 rad/s, got {self.max_speed}")
+        if not (self.max_error_m > 0.0):
+            raise ConfigError(f"max_error_m: expected > 0 m, got {self.max_error_m}")
 
     def gains(self, rate_hz: float) -> FloatArray:
         dt = 1.0 / (rate_hz * self.substeps)
         kp, kd = self.kappa / dt**2, 1.0 / dt
-        return np.array([kp, kd, kp, kd, self.posture_kp, self.posture_kd, self.damping])
+        row = [kp, kd, kp, kd, self.posture_kp, self.posture_kd, self.damping, self.max_speed]
+        return np.array([*row, self.max_error_m, float(self.reacquire)])
 
 
 @dataclass(frozen=True)

@@ -112,6 +112,115 @@ def _lock_rows(
 
 
 @njit(cache=True)
+def _cap_speed(v: FloatArray, max_speed: float) -> None:
+    """In place: angular rates within ``max_speed`` [rad/s], the pelvis' linear velocity
+    within ``max_speed / 4`` [m/s] (direction kept)."""
+    lin = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    if lin > 0.25 * max_speed:
+        for c in range(3):
+            v[c] *= 0.25 * max_speed / lin
+    ang = np.sqrt(v[3] * v[3] + v[4] * v[4] + v[5] * v[5])
+    if ang > max_speed:
+        for c in range(3, 6):
+            v[c] *= max_speed / ang
+    for i in range(6, v.shape[0]):
+        v[i] = min(max(v[i], -max_speed), max_speed)
+
+
+@njit(cache=True)
+def reacquire(
+    parent: np.ndarray,
+    R0: FloatArray,
+    p0: FloatArray,
+    axis: FloatArray,
+    marker_joint: np.ndarray,
+    marker_offset: FloatArray,
+    q: FloatArray,
+    v: FloatArray,
+    x0: FloatArray,
+    x1: FloatArray,
+    row_weight: FloatArray,
+    level_markers: np.ndarray,
+    dof_ptr: np.ndarray,
+    dof_markers: np.ndarray,
+    lock_dof: np.ndarray,
+    lower: FloatArray,
+    upper: FloatArray,
+) -> int:
+    """In place on q, v: when tracked markers appear (visible at t_f, not at t_{f-1}), fit
+    the pelvis and the DOFs that carry them (the chain from the pelvis to their segments,
+    coordinate tasks excepted) to all visible tracked markers at t_f by damped
+    Gauss-Newton; those DOFs restart at rest. Returns how many DOFs were fitted.
+
+    Through a gap the simulation holds the DOFs no marker determines and leaves the
+    directions no visible marker sees where they were (the pelvis with two markers in
+    view, the head's roll about its one marker); a marker appearing far from the model
+    would then be chased over many frames (walking2: a head marker 240 mm off took 25
+    frames). The fit is IK of the visible markers over those DOFs alone; the rest of the
+    state is untouched, so markers already tracked are refitted where they are."""
+    M = marker_joint.shape[0]
+    nv = v.shape[0]
+    n_dof = nv - 6
+    appeared = np.zeros(M, dtype=np.bool_)
+    vis1 = np.zeros(M, dtype=np.bool_)
+    any_new = False
+    for k in range(level_markers.shape[0]):
+        m = level_markers[k]
+        vis1[m] = np.isfinite(x1[m, 0])
+        appeared[m] = vis1[m] and not np.isfinite(x0[m, 0])
+        any_new = any_new or appeared[m]
+    if not any_new:
+        return 0
+    cols = np.empty(nv, dtype=np.int64)
+    for c in range(6):
+        cols[c] = c
+    n = 6
+    for k in range(n_dof):
+        held = False
+        for c in range(lock_dof.shape[0]):
+            if lock_dof[c] == 7 + k:
+                held = True
+        carries = False
+        for i in range(dof_ptr[k], dof_ptr[k + 1]):
+            if appeared[dof_markers[i]]:
+                carries = True
+        if carries and not held:
+            cols[n] = 6 + k
+            n += 1
+    cols = cols[:n]
+    for _it in range(20):
+        R, t, S = forward_kinematics(parent, R0, p0, axis, q)
+        P, J = marker_kinematics(parent, R, t, S, marker_joint, marker_offset)
+        H = np.zeros((n, n))
+        g = np.zeros(n)
+        for m in range(M):
+            if not vis1[m]:
+                continue
+            Jc = J[m][:, cols]
+            e = x1[m] - P[m]
+            H += row_weight[m] * (Jc.T @ Jc)
+            g += row_weight[m] * (Jc.T @ e)
+        mu = 1e-6 * max(np.trace(H) / n, 1e-12)
+        for c in range(n):
+            H[c, c] += 1e-3 * H[c, c] + mu  # Marquardt: unseen directions stay put
+        step = np.linalg.solve(H, g)
+        big = np.abs(step).max()
+        if big > 0.5:  # keep each iteration within the linearisation's reach [rad, m]
+            step *= 0.5 / big
+        dv = np.zeros(nv)
+        for c in range(n):
+            dv[cols[c]] = step[c]
+        q[:] = integrate(q, dv)
+        for iq in range(7, q.shape[0]):
+            q[iq] = min(max(q[iq], lower[iq]), upper[iq])
+        if big < 1e-9:
+            break
+    for c in range(6, n):
+        v[cols[c]] = 0.0
+    return n - 6
+
+
+@njit(cache=True)
 def osc_frame(
     parent: np.ndarray,
     R0: FloatArray,
@@ -157,7 +266,8 @@ def osc_frame(
         lock_dof, lock_value: q indices held at values (coordinate tasks).
         lower, upper: (nq,) limits (root entries infinite).
         q_posture: (nq,) posture target.
-        gains: [kp, kd, kp_lock, kd_lock, kp_posture, kd_posture, damping] per substep.
+        gains: [kp, kd, kp_lock, kd_lock, kp_posture, kd_posture, damping, max_speed,
+            max_error_m, reacquire] (see :class:`~mocapkit.markers.osc.OSCParams`).
 
     Returns:
         q, v at t_f; P (M, 3) tracked markers; Δq (nv,) the bound of eq. 15 (zero on held
@@ -167,7 +277,15 @@ def osc_frame(
     nv = v.shape[0]
     M = marker_joint.shape[0]
     kp, kd, kpl, kdl, kpp, kdp = gains[0], gains[1], gains[2], gains[3], gains[4], gains[5]
+    e_max = gains[8]
     dt = dt_frame / n_sub
+    q = q.copy()
+    v = v.copy()
+    if gains[9] > 0.0:
+        reacquire(
+            parent, R0, p0, axis, marker_joint, marker_offset, q, v, x0, x1, row_weight,
+            level_markers, dof_ptr, dof_markers, lock_dof, lower, upper,
+        )  # fmt: skip
     tracked = np.zeros(M, dtype=np.bool_)
     for m in range(M):
         tracked[m] = np.isfinite(x0[m, 0]) or np.isfinite(x1[m, 0])
@@ -209,11 +327,14 @@ def osc_frame(
                     xdes, vdes, ades = x1[m], np.zeros(3), np.zeros(3)
                 Jv = J[m] @ v
                 sw = np.sqrt(row_weight[m])
+                e = xdes - P[m]
+                en = np.sqrt(e @ e)
+                sat = 1.0 if en <= e_max else e_max / en  # a far marker: reached gradually
                 for c in range(3):
                     Jm[r + c] = sw * J[m, c]
-                    accm[r + c] = sw * (ades[c] + kd * (vdes[c] - Jv[c]) + kp * (xdes[c] - P[m, c]))
+                    accm[r + c] = sw * (ades[c] + kd * (vdes[c] - Jv[c]) + kp * sat * e[c])
                     biasm[r + c] = sw * B[m, c]
-                    dxm[r + c] = sw * (xdes[c] - P[m, c])
+                    dxm[r + c] = sw * e[c]
                 r += 3
             mptr[lv + 1] = r
         push = Jm.T @ (accm - biasm)
@@ -243,9 +364,10 @@ def osc_frame(
             a_post[iq - 1] += kpp * (q_posture[iq] - q[iq])
         # the bound (eq. 15) of the last step's marker errors; lock rows have no error
         _Gamma, qdd, dq = prioritized_torque(
-            Amat, LA, h, Jall, acc, bias, ptr, a_post, dx, j == n_sub - 1, gains[6]
+            Amat, LA, h, Jall, acc, bias, ptr, a_post, dx, j == n_sub - 1, gains[6], True
         )
         v = v + qdd * dt
+        _cap_speed(v, gains[7])
         q = integrate(q, v * dt)
         for iq in range(7, q.shape[0]):
             if q[iq] < lower[iq]:

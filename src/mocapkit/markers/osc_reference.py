@@ -31,6 +31,7 @@ def prioritized_torque_reference(
     level_ptr: Sequence[int],
     posture_acc: FloatArray,
     damping: float,
+    exact_first: bool = False,
 ) -> tuple[FloatArray, FloatArray]:
     """Γ (eq. 11) and Jbar_⊗ (nv, R) with the damped task-space inertia of each level
     ``Λ = (J_k|p A⁻¹ J_k|pᵀ + λ² I)⁻¹`` and exact null-space projectors (see
@@ -40,14 +41,15 @@ def prioritized_torque_reference(
     N = np.eye(nv)
     Gamma = np.zeros(nv)
     Jbar_all = np.zeros((nv, J.shape[0]))
-    levels = [(level_ptr[k], level_ptr[k + 1]) for k in range(len(level_ptr) - 1)]
-    levels = [(a, b) for a, b in levels if b > a]
-    for i, (a, b) in enumerate(levels):
+    levels = [(k, level_ptr[k], level_ptr[k + 1]) for k in range(len(level_ptr) - 1)]
+    levels = [(k, a, b) for k, a, b in levels if b > a]
+    for i, (k0, a, b) in enumerate(levels):
         Jk = J[a:b]
         scale = float(np.trace(Jk @ Ainv @ Jk.T))
         if scale <= 0:
             continue
-        lam2 = damping * scale / (b - a) + 1e-10 * scale
+        lam2 = 0.0 if exact_first and k0 == 0 else damping * scale / (b - a)
+        lam2 += 1e-10 * scale
         Jp = Jk @ N
         X = Jp @ Ainv @ Jp.T
         w, U = np.linalg.eigh(X)
@@ -104,6 +106,46 @@ class ReferenceStepper:
                 target.append(float(hi[iq]))
         return rows, target
 
+    def _reacquire(
+        self, q: FloatArray, v: FloatArray, x0: FloatArray, x1: FloatArray,
+        row_weight: FloatArray, level_markers: Any, dof_ptr: Any, dof_markers: Any,
+        lock_dof: Any, lower: FloatArray, upper: FloatArray,
+    ) -> FloatArray:  # fmt: skip
+        """q after fitting the pelvis and the DOFs carrying newly visible markers; v in
+        place (the kernel's ``reacquire``)."""
+        level = np.zeros(len(x1), dtype=bool)
+        level[np.asarray(level_markers, dtype=int)] = True
+        vis1 = level & np.isfinite(x1[:, 0])
+        appeared = vis1 & ~np.isfinite(x0[:, 0])
+        if not appeared.any():
+            return q
+        n_dof = len(v) - 6
+        carries = np.array(
+            [appeared[dof_markers[dof_ptr[k] : dof_ptr[k + 1]]].any() for k in range(n_dof)]
+        )
+        carries[[int(i) - 7 for i in lock_dof]] = False
+        cols = np.concatenate([np.arange(6), 6 + np.flatnonzero(carries)])
+        w = row_weight[vis1]
+        for _ in range(20):
+            P, J = self.kin.reference_positions_jacobians(q)
+            Jc = J[vis1][:, :, cols]  # (m, 3, n)
+            H = np.einsum("m,mci,mcj->ij", w, Jc, Jc)
+            g = np.einsum("m,mci,mc->i", w, Jc, x1[vis1] - P[vis1])
+            mu = 1e-6 * max(float(np.trace(H)) / cols.size, 1e-12)
+            H[np.diag_indices_from(H)] += 1e-3 * np.diag(H) + mu
+            step = np.linalg.solve(H, g)
+            big = float(np.abs(step).max())
+            if big > 0.5:
+                step *= 0.5 / big
+            dv = np.zeros(len(v))
+            dv[cols] = step
+            q = np.asarray(self._pin.integrate(self.model, q, dv))
+            q[7:] = np.clip(q[7:], lower[7:], upper[7:])
+            if big < 1e-9:
+                break
+        v[cols[6:]] = 0.0
+        return q
+
     def frame(
         self,
         q: FloatArray,
@@ -127,7 +169,7 @@ class ReferenceStepper:
         n_sub: int,
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
         pin, model, data = self._pin, self.model, self.data
-        kp, kd, kpl, kdl, kpp, kdp, damping = (float(g) for g in gains)
+        kp, kd, kpl, kdl, kpp, kdp, damping, max_speed, e_max, reacq = (float(g) for g in gains)
         nv, M = model.nv, len(x1)
         dt = dt_frame / n_sub
         tracked = np.isfinite(x0[:, 0]) | np.isfinite(x1[:, 0])
@@ -135,6 +177,9 @@ class ReferenceStepper:
             [tracked[dof_markers[dof_ptr[k] : dof_ptr[k + 1]]].any() for k in range(nv - 6)]
         )
         q, v = q.copy(), v.copy()
+        if reacq > 0.0:
+            q = self._reacquire(q, v, x0, x1, row_weight, level_markers, dof_ptr, dof_markers,
+                                lock_dof, lower, upper)  # fmt: skip
         dq = np.zeros(nv)
         for j in range(n_sub):
             s = j * dt
@@ -158,7 +203,9 @@ class ReferenceStepper:
                     else:
                         xdes, vdes, ades = x1[m], np.zeros(3), np.zeros(3)
                     sw = np.sqrt(row_weight[m])
-                    a_task = ades + kd * (vdes - J[m] @ v) + kp * (xdes - P[m])
+                    e = xdes - P[m]
+                    sat = min(1.0, e_max / max(float(np.linalg.norm(e)), 1e-300))
+                    a_task = ades + kd * (vdes - J[m] @ v) + kp * sat * e
                     Jm += list(sw * J[m])
                     accm += list(sw * a_task)
                     biasm += list(sw * B[m])
@@ -179,12 +226,18 @@ class ReferenceStepper:
             a_post[6:] += kpp * (q_posture[7:] - q[7:])
             Gamma, Jbar = prioritized_torque_reference(
                 Amat, h, np.vstack([lock_J, Jmat]), np.array(lock_acc + accm),
-                np.array([0.0] * len(rows) + biasm), ptr, a_post, damping,
+                np.array([0.0] * len(rows) + biasm), ptr, a_post, damping, True,
             )  # fmt: skip
             if dx:
                 dq = Jbar[:, len(rows) :] @ np.array(dx)  # eq. 15, the last step's errors
             qdd = np.linalg.solve(Amat, Gamma - h)
             v = v + qdd * dt
+            lin, ang = np.linalg.norm(v[:3]), np.linalg.norm(v[3:6])
+            if lin > 0.25 * max_speed:
+                v[:3] *= 0.25 * max_speed / lin
+            if ang > max_speed:
+                v[3:6] *= max_speed / ang
+            v[6:] = np.clip(v[6:], -max_speed, max_speed)
             q = np.asarray(pin.integrate(model, q, v * dt))
             low, high = q[7:] < lower[7:], q[7:] > upper[7:]
             q[7:] = np.clip(q[7:], lower[7:], upper[7:])

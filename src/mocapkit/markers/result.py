@@ -41,9 +41,10 @@ class ReconstructionResult:
         marker_names: the M markers of the trial; tracked: those the method used.
         commanded, tracked_positions: (N, M, 3) captured and model markers [m].
         errors: (N, M) distance [m] for visible markers, NaN otherwise.
-        dq: (N, nv) joint-error bound Δq = Jbar_⊗ Δx_⊗ (eq. 15) [rad; root translation m]:
-            NaN where the DOF is not determined, capped at the joint's range
-            (:mod:`mocapkit.markers.bounds`).
+        dq: (N, nv) joint-error bound Δq = Jbar_⊗ Δx_⊗ (eq. 15) of the model's DOFs [rad;
+            root translation m]: NaN where the DOF is not determined, capped at the joint's
+            range (:mod:`mocapkit.markers.bounds`); :attr:`coordinate_bound` is the same
+            for the reported coordinates, which the figures use.
         levels: the marker subsets in priority order.
         elapsed_s: wall time of the reconstruction loop.
         bound: the bound's report (capped entries, conditioning per frame and DOF).
@@ -94,61 +95,22 @@ class ReconstructionResult:
         coords, gimbal = coordinates_and_gimbal(human, Q, cmap)
         root, dofs = dof_determined(human, names, tracked, X, held=locked)
         det = column_determined(cmap, root, dofs)
-        coords = np.where(det, coords, np.nan)
-        cnames = cmap.names
-
-        def warn(msg: str) -> None:
-            warnings.append(msg)
-            log.warning("%s", msg)
-
-        never = [c for k, c in enumerate(cnames) if not det[:, k].any()]
-        if never:
-            warn(
-                f"{len(never)} coordinates are not determined by any tracked marker and are left "
-                f"out of the outputs: {', '.join(never)}"
-            )
-        partial = [c for k, c in enumerate(cnames) if det[:, k].any() and not det[:, k].all()]
-        if partial:
-            warn(
-                f"coordinates {', '.join(partial[:10])} are undetermined (NaN) in some frames "
-                "where their markers are missing"
-            )
-        t = np.asarray(time, dtype=float)
-        blind = _no_visible_frames(X, names, tracked)
-        if blind.any():
-            idx = np.flatnonzero(blind)
-            warn(
-                f"{idx.size} of {len(t)} frames have no visible tracked marker (first at "
-                f"t = {t[idx[0]]:.3f} s, last at t = {t[idx[-1]]:.3f} s): the pose is held there "
-                "and they have no marker error and no error bound (NaN in the per-frame series, "
-                "left out of marker_rms_mm and the other figures)"
-            )
-        for joint, close in gimbal.items():
-            k = cnames.index(joint)
-            n_close = int((close & det[:, k]).sum())
-            if n_close:
-                warn(
-                    f"{joint} within 10 deg of +-90 deg in {n_close} frames (gimbal lock of "
-                    "OpenSim's rotation order): the other two angles of that joint are "
-                    "ill-defined there (the model's own DOFs in q are not)"
-                )
         w = np.ones(len(names)) if weights is None else np.asarray(weights, dtype=float)
         in_fit = np.array([n in set(tracked) for n in names])
-        report = bound_report(human, names, Q, X, np.where(in_fit, w, 0.0), dq, root, dofs)
-        n_capped = int(report.capped.any(axis=1).sum())
-        if n_capped:
-            warn(
-                f"the joint-error bound (eq. 15) exceeded a joint's range in {n_capped} frames "
-                "and is capped at the range there (the linearisation is meaningless that far)"
-            )
-        if report.poorly_determined:
-            worst = sorted(report.poorly_determined.items(), key=lambda kv: -kv[1])[:6]
-            warn(
-                "poorly determined by the visible markers (more than "
-                f"{POORLY_DETERMINED_DEG_PER_MM:g} deg per mm of marker error): "
-                + ", ".join(f"{d} in {n} frames" for d, n in worst)
-                + "; their joint-error bounds rest on an ill-conditioned fit"
-            )
+        report = bound_report(
+            human, cmap, names, Q, X, np.where(in_fit, w, 0.0), dq, root, dofs,
+            held=list(locked), columns=det,
+        )  # fmt: skip
+        structural = det
+        det = det & ~report.unobserved
+        coords = np.where(det, coords, np.nan)
+        t = np.asarray(time, dtype=float)
+        for msg in _coverage_warnings(
+            cmap.names, structural, det, gimbal, report, t, _no_visible_frames(X, names, tracked)
+        ):
+            warnings.append(msg)
+            log.warning("%s", msg)
+        cnames = cmap.names
         return cls(
             time=t,
             q=Q,
@@ -196,10 +158,18 @@ class ReconstructionResult:
         out[n > 0] = np.sqrt(sq[n > 0] / n[n > 0])
         return out
 
+    @property
+    def coordinate_bound(self) -> FloatArray:
+        """(N, K) the joint-error bound of the reported coordinates (eq. 15 through their
+        Jacobian; NaN where undetermined, capped) [rad; translations m]."""
+        if self.bound is None:
+            return np.full(self.coordinates.shape, np.nan)
+        return self.bound.dc
+
     def dq_extremes(self) -> tuple[FloatArray, FloatArray]:
-        """Per frame Δq_max and Δq_min over the determined rotational DOFs (eq. 17) [rad];
-        NaN in frames where no DOF is determined."""
-        rot = self.dq[:, 3:]
+        """Per frame Δq_max and Δq_min over the determined rotational coordinates (eq. 17)
+        [rad]; NaN in frames where none is determined."""
+        rot = self.coordinate_bound[:, self.angular]
         has = np.isfinite(rot).any(axis=1)
         hi = np.full(rot.shape[0], np.nan)
         lo = np.full(rot.shape[0], np.nan)
@@ -214,7 +184,7 @@ class ReconstructionResult:
         rms = self.frame_rms(markers)
         e = self._errors_of(markers)
         seen = np.isfinite(rms)
-        bound = np.abs(self.dq[:, 3:])
+        bound = np.abs(self.coordinate_bound[:, self.angular])
         has = np.isfinite(bound)
 
         def rounded(x: float | None, digits: int) -> float | None:
@@ -279,3 +249,68 @@ def _no_visible_frames(X: FloatArray, names: Sequence[str], tracked: Sequence[st
     keep = set(tracked)
     cols = [i for i, n in enumerate(names) if n in keep]
     return np.asarray(~np.isfinite(X[:, cols, 0]).any(axis=1))
+
+
+def _coverage_warnings(
+    cnames: Sequence[str],
+    structural: np.ndarray,
+    det: np.ndarray,
+    gimbal: Mapping[str, np.ndarray],
+    report: BoundReport,
+    t: FloatArray,
+    blind: np.ndarray,
+) -> list[str]:
+    """What the outputs leave out or cannot vouch for, in words (see ReconstructionResult)."""
+    out = []
+    never = [c for k, c in enumerate(cnames) if not det[:, k].any()]
+    if never:
+        out.append(
+            f"{len(never)} coordinates are not determined by any tracked marker and are left "
+            f"out of the outputs: {', '.join(never)}"
+        )
+    partial = [c for k, c in enumerate(cnames) if det[:, k].any() and not det[:, k].all()]
+    if partial:
+        out.append(
+            f"coordinates {', '.join(partial[:10])}{' ...' if len(partial) > 10 else ''} are "
+            "undetermined (NaN) in some frames where their markers are missing"
+        )
+    unobserved = structural & report.unobserved
+    if unobserved.any():
+        counts = [(c, int(unobserved[:, k].sum())) for k, c in enumerate(cnames)]
+        worst = sorted((kv for kv in counts if kv[1]), key=lambda kv: -kv[1])[:8]
+        out.append(
+            "numerically undetermined, so NaN there (the visible markers leave a direction "
+            "of them unobserved, e.g. one marker for several DOFs): "
+            + ", ".join(f"{c} in {n} frames" for c, n in worst)
+        )
+    if blind.any():
+        idx = np.flatnonzero(blind)
+        out.append(
+            f"{idx.size} of {len(t)} frames have no visible tracked marker (first at "
+            f"t = {t[idx[0]]:.3f} s, last at t = {t[idx[-1]]:.3f} s): the pose is held there "
+            "and they have no marker error and no error bound (NaN in the per-frame series, "
+            "left out of marker_rms_mm and the other figures)"
+        )
+    for joint, close in gimbal.items():
+        n_close = int((close & det[:, list(cnames).index(joint)]).sum())
+        if n_close:
+            out.append(
+                f"{joint} within 10 deg of +-90 deg in {n_close} frames (gimbal lock of "
+                "OpenSim's rotation order): the other two angles of that joint are "
+                "ill-defined there (the model's own DOFs in q are not)"
+            )
+    n_capped = int(report.capped.any(axis=1).sum())
+    if n_capped:
+        out.append(
+            f"the joint-error bound (eq. 15) exceeded a joint's range in {n_capped} frames "
+            "and is capped at the range there (the linearisation is meaningless that far)"
+        )
+    if report.poorly_determined:
+        worst = sorted(report.poorly_determined.items(), key=lambda kv: -kv[1])[:6]
+        out.append(
+            "poorly determined by the visible markers (more than "
+            f"{POORLY_DETERMINED_DEG_PER_MM:g} deg per mm of marker error): "
+            + ", ".join(f"{d} in {n} frames" for d, n in worst)
+            + "; their joint-error bounds rest on an ill-conditioned fit"
+        )
+    return out
