@@ -41,6 +41,7 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.body.human_model import HumanModel
 from mocapkit.markers import rigid_fast
+from mocapkit.markers.bound_fit import total_bound
 from mocapkit.markers.coordinates import CoordinateMap, coordinates_from_q
 from mocapkit.markers.kinematics import MarkerKinematics
 
@@ -137,6 +138,9 @@ class BoundReport:
         unobserved: (N, K) bool, coordinates some visible marker reaches structurally but
             that move along a direction no visible marker sees (infinite sensitivity):
             numerically undetermined; ``dc`` is NaN there.
+        total: (N, K) the bound that holds, |distance to the markers' best fit| plus what
+            the markers' noise can move that fit (:mod:`mocapkit.markers.bound_fit`), capped
+            like ``dc``; NaN where undetermined or without redundancy to estimate the noise.
     """
 
     dq: FloatArray
@@ -145,6 +149,7 @@ class BoundReport:
     sensitivity_deg_per_mm: FloatArray
     poorly_determined: dict[str, int]
     unobserved: np.ndarray
+    total: FloatArray
 
     @property
     def worst_sensitivity_deg_per_mm(self) -> FloatArray:
@@ -250,4 +255,6 @@ def bound_report(
     with np.errstate(invalid="ignore"):
         poor = (sens > POORLY_DETERMINED_DEG_PER_MM) & ~unobserved
     counts = {c: int(poor[:, k].sum()) for k, c in enumerate(cmap.names) if poor[:, k].any()}
-    return BoundReport(out, dc, capped, sens, counts, unobserved)
+    total = total_bound(human, cmap, names, Q, X, weights, free, rows & ~unobserved)
+    total = np.minimum(total, cspan[None, :])
+    return BoundReport(out, dc, capped, sens, counts, unobserved, total)
