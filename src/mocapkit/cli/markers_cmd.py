@@ -84,6 +84,13 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         default=None,
         help="zero-phase Butterworth low-pass cut-off [Hz] (default off)",
     )
+    p.add_argument(
+        "--ik-setup",
+        type=Path,
+        default=None,
+        help="OpenSim IK setup XML (e.g. subject01_Setup_IK.xml): its marker weights, "
+        "coordinate tasks and time range (--start-s/--end-s win)",
+    )
     p.add_argument("--start-s", type=float, default=None, help="first time to use [s]")
     p.add_argument("--end-s", type=float, default=None, help="last time to use [s]")
     p.add_argument(
@@ -101,6 +108,8 @@ _GAIT = "../shared/data/opensim/gait2392"
 _EX_RECONSTRUCT = f"""examples:
   mocapkit markers reconstruct {_GAIT}/subject01_walk1.trc \\
       --static {_GAIT}/subject01_static.trc --height-m 1.8034 --mass-kg 72.6 -o walk.mot --json
+  mocapkit markers reconstruct {_GAIT}/subject01_walk1.trc --static {_GAIT}/subject01_static.trc \\
+      --ik-setup {_GAIT}/subject01_Setup_IK.xml --method ik -o walk_ik.mot
   mocapkit markers reconstruct ../shared/data/c3d/walking2.c3d --markerset walking2 --method ik \\
       -o walking2.mot
 """
@@ -199,8 +208,9 @@ def _run(args: argparse.Namespace) -> Any:
         ik=IKParams(backend=args.backend),
     )  # fmt: skip
     return run(
-        args.trial, args.static, args.markerset, args.height_m, args.mass_kg, options, args.sex
-    )
+        args.trial, args.static, args.markerset, args.height_m, args.mass_kg, options, args.sex,
+        args.ik_setup,
+    )  # fmt: skip
 
 
 def _reconstruct(args: argparse.Namespace) -> int:

@@ -367,6 +367,44 @@ def reconstruct(
     return result
 
 
+def apply_ik_setup(
+    ms: MarkerSet, options: ReconstructionOptions, setup_path: str | Path, warnings: _Warnings
+) -> tuple[MarkerSet, ReconstructionOptions]:
+    """An OpenSim IK setup's marker weights and coordinate tasks on the marker set, its time
+    range on the options (unless they set one). Markers the setup does not name keep the
+    set's weights (said in a warning); markers it names that the set lacks are a warning."""
+    import dataclasses
+
+    from mocapkit.io.opensim_ik_setup import read_ik_setup
+
+    setup = read_ik_setup(setup_path)
+    names = set(ms.names)
+    unknown = [n for n in setup.marker_weights if n not in names]
+    if unknown:
+        warnings.add(
+            f"{setup_path}: markers {', '.join(unknown[:10])} are not in marker set "
+            f"{ms.name!r}; their IK weights are ignored (add them to a YAML marker set)"
+        )
+    unnamed = [n for n in ms.names if n not in setup.marker_weights]
+    if unnamed:
+        warnings.add(
+            f"{setup_path}: names no IK task for markers {', '.join(unnamed[:10])}"
+            f"{' ...' if len(unnamed) > 10 else ''}; they keep marker set {ms.name!r}'s weights"
+        )
+    markers = tuple(
+        dataclasses.replace(m, weight=setup.marker_weights.get(m.name, m.weight))
+        for m in ms.markers
+    )
+    ms = dataclasses.replace(ms, markers=markers, coordinate_tasks=dict(setup.coordinate_tasks))
+    if setup.time_range is not None and options.start_s is None and options.end_s is None:
+        options = dataclasses.replace(
+            options, start_s=setup.time_range[0], end_s=setup.time_range[1]
+        )
+    if setup.ignored:
+        log.info("%s: settings without effect here: %s", setup_path, ", ".join(setup.ignored))
+    return ms, options
+
+
 def run(
     trial_path: str | Path,
     static_path: str | Path | None,
@@ -375,11 +413,13 @@ def run(
     mass_kg: float | None,
     options: ReconstructionOptions | None = None,
     sex: Sex = "male",
+    ik_setup: str | Path | None = None,
 ) -> tuple[ReconstructionResult, Subject, CleaningReport]:
     """Files to joint angles: load, check, clean, calibrate, reconstruct.
 
     ``height_m`` None: estimated from the static trial (vertical extent of its markers);
     ``mass_kg`` None: 75 kg (only the simulated dynamics depend on it, not the angles of IK).
+    ``ik_setup``: an OpenSim IK setup XML (:func:`apply_ik_setup`).
     """
     opts = options or ReconstructionOptions()
     warn = _Warnings()
@@ -390,6 +430,8 @@ def run(
         log.info("marker set %s matches %d of the trial's labels", ms.name, len(match.index))
     else:
         ms = load_markerset(markerset)
+    if ik_setup is not None:
+        ms, opts = apply_ik_setup(ms, opts, ik_setup, warn)
     trial, static, cleaning = prepare(trial, static, ms, opts, warn)
     if static is not None:
         check_static_matches(static, trial, ms, warn)
@@ -408,6 +450,7 @@ def run(
             "scaling": subject.report.get("segment_scales", {}),
             "source": str(trial_path),
             "static": None if static_path is None else str(static_path),
+            "ik_setup": None if ik_setup is None else str(ik_setup),
         }
     )
     return result, subject, cleaning
