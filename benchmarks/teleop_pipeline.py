@@ -66,8 +66,10 @@ def process_cost(n_packets: int = 3000, preset: str = "full_body_15") -> dict[st
                 [SuitSample(i + 1, 0, 0.0, 0, Kind.ORIENTATION, q0[i]) for i in range(n)], now
             )
             time.sleep(0.005)
-        T, _ = pipe.model_pose(time.monotonic())
-        assert T is not None
+        now = time.monotonic()  # fresh data: a loaded machine may have slept > 0.1 s
+        pipe.ingest([SuitSample(i + 1, 0, 0.0, 0, Kind.ORIENTATION, q0[i]) for i in range(n)], now)
+        T, fault = pipe.model_pose(now)
+        assert T is not None, fault
         pos, quat = pose_parts(T)
         session.engage(time.monotonic())
         rng = np.random.default_rng(0)
