@@ -8,6 +8,7 @@ import pytest
 
 from mocapkit.errors import ConfigError
 from mocapkit.geometry import quat_exp, quat_mul, quat_rotate_inv
+from mocapkit.imu import filter_bank
 from mocapkit.imu.filter_bank import FilterBank, has_bank_kernel
 from mocapkit.imu.filters import make_filter
 from mocapkit.imu.still_start import StillStartFilter
@@ -32,16 +33,23 @@ def _signals(rng: np.random.Generator, n: int) -> tuple[np.ndarray, ...]:
     return gyr, acc, mag
 
 
-@pytest.mark.parametrize("name", ["miller", "bachmann", "polaris"])
+@pytest.mark.parametrize(
+    ("name", "batched"),
+    [("miller", True), ("bachmann", True), ("polaris", True), ("miller", False)],
+)
 @pytest.mark.parametrize("use_mag", [True, False])
-def test_bank_equals_one_still_start_filter_per_sensor(name: str, use_mag: bool) -> None:
+def test_bank_equals_one_still_start_filter_per_sensor(
+    name: str, batched: bool, use_mag: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    if not batched:  # a filter without a bank kernel: every sample on its object
+        monkeypatch.setattr(filter_bank, "_SPECS", {})
     rng = np.random.default_rng(3)
     n = 160
     gyr, acc, mag = _signals(rng, n)
     mag[70, 2] = np.nan  # a magnetometer gap (all three NaN): 6D for that sample
     gyr[90, 1, 0] = np.nan  # a broken gyroscope sample: refused, the state unchanged
     bank = FilterBank(name, RATE, S, still_s=0.3, use_mag=use_mag)
-    assert bank.batched == has_bank_kernel(name)
+    assert bank.batched == batched == has_bank_kernel(name)
     objs = [StillStartFilter(make_filter(name, RATE), 0.3) for _ in range(S)]
     # batches of varying make-up: some sensors missing, some twice (a late drain)
     queue = [(k, s) for k in range(n) for s in range(S)]
@@ -68,11 +76,12 @@ def test_bank_equals_one_still_start_filter_per_sensor(name: str, use_mag: bool)
         np.testing.assert_allclose(bank.bias, [o.bias for o in objs], atol=1e-15)
 
 
-def test_a_non_batched_filter_names_its_errors() -> None:
-    bank = FilterBank("polaris", RATE, 1, still_s=0.0)
+def test_errors_in_the_still_start_are_named_by_the_filter_object() -> None:
+    bank = FilterBank("polaris", RATE, 1, still_s=0.5)
     q, errors = bank.update([0], [[np.nan, 0.0, 0.0]], [[0.0, 0.0, GRAVITY]])
     assert np.isnan(q).all()
     assert errors[0].startswith("gyr: non-finite value at sample 0")
+    assert not bank.in_bank[0]
 
 
 def test_bank_input_errors() -> None:

@@ -5,20 +5,22 @@ one filter object per sensor and each sample costs a Python call (validation, st
 handling around the numba kernel: 50-100 us); a :class:`FilterBank` keeps every sensor's
 state in arrays and advances all of a round's samples in one numba call (a few us per
 sample), for the filters that have a bank kernel (:mod:`mocapkit.imu.filter_bank_kernels`:
-``miller``, ``bachmann``). Others run per sensor, unchanged.
+``miller``, ``bachmann``, ``polaris``). Others run per sensor, unchanged.
 
 The result is exactly that of one ``StillStartFilter(make_filter(name, rate_hz),
 still_s)`` per sensor fed sample by sample (tested to 1e-12): each sensor starts on its
 own filter object (initialisation from its first sample, then the still start: gyroscope
 bias and orientation from the first ``still_s``), and once that is done (and, for a
 filter that needs it, its magnetic dip is known) its state moves into the bank's arrays
-and the object is no longer used. Per-sample time step: the filter's nominal ``dt``.
+and the object is no longer used. Per-sample time step: the filter's nominal ``dt``. A
+filter with a gyroscope range (saturation warnings) runs per sensor.
 """
 
 from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -28,8 +30,9 @@ from mocapkit.errors import ConfigError, MocapkitError
 from mocapkit.imu import filter_bank_kernels as bk
 from mocapkit.imu.filters import make_filter
 from mocapkit.imu.filters.bachmann import BachmannFilter
-from mocapkit.imu.filters.base import OrientationFilter
 from mocapkit.imu.filters.miller import MillerFilter
+from mocapkit.imu.filters.polaris import Polaris
+from mocapkit.imu.filters.polaris_params import pack_state
 from mocapkit.imu.still_start import StillStartFilter
 
 log = logging.getLogger(__name__)
@@ -42,28 +45,61 @@ _STATUS = {
 }
 
 
-def _miller_params(f: OrientationFilter) -> FloatArray:
-    assert isinstance(f, MillerFilter)
+@dataclass(frozen=True)
+class _Spec:
+    """How a filter class runs in the bank: its kernel, its state and parameters as flat
+    rows, and when a started filter object can hand its state over."""
+
+    kernel: Callable[..., None]
+    state: Callable[[Any], FloatArray]
+    params: Callable[[Any], FloatArray]
+    ready: Callable[[Any, bool], bool]
+
+
+def _quat(f: Any) -> FloatArray:
+    return np.array(f.state.quat, dtype=np.float64)
+
+
+def _miller_params(f: MillerFilter) -> FloatArray:
     return np.array([f.params.alpha])
 
 
-def _bachmann_params(f: OrientationFilter) -> FloatArray:
-    assert isinstance(f, BachmannFilter)
+def _bachmann_params(f: BachmannFilter) -> FloatArray:
     m_ref, ok = f._field()
     return np.array([f.params.alpha, *m_ref, 1.0 if ok else 0.0])
 
 
-#: filter class -> (bank kernel, the filter's per-sensor parameter row, needs the dip)
-_KERNELS: dict[type, tuple[Callable[..., None], Callable[[OrientationFilter], FloatArray], bool]]
-_KERNELS = {
-    MillerFilter: (bk.miller_bank_kernel, _miller_params, False),
-    BachmannFilter: (bk.bachmann_bank_kernel, _bachmann_params, True),
+def _always(f: Any, use_mag: bool) -> bool:
+    return True
+
+
+def _bachmann_ready(f: BachmannFilter, use_mag: bool) -> bool:
+    """The reference field needs the dip: until it is known the object measures it."""
+    return not use_mag or bool(np.isfinite(f.state.dip))
+
+
+def _polaris_state(f: Polaris) -> FloatArray:
+    return pack_state(f.state.core)
+
+
+def _polaris_params(f: Polaris) -> FloatArray:
+    return np.asarray(f._c, dtype=np.float64)
+
+
+def _polaris_ready(f: Polaris, use_mag: bool) -> bool:
+    return f.state.started
+
+
+_SPECS: dict[type, _Spec] = {
+    MillerFilter: _Spec(bk.miller_bank_kernel, _quat, _miller_params, _always),
+    BachmannFilter: _Spec(bk.bachmann_bank_kernel, _quat, _bachmann_params, _bachmann_ready),
+    Polaris: _Spec(bk.polaris_bank_kernel, _polaris_state, _polaris_params, _polaris_ready),
 }
 
 
 def has_bank_kernel(name: str, rate_hz: float = 100.0) -> bool:
     """Whether the registered filter ``name`` runs in the bank (else per sensor)."""
-    return type(make_filter(name, rate_hz)) in _KERNELS
+    return type(make_filter(name, rate_hz)) in _SPECS
 
 
 class FilterBank:
@@ -94,32 +130,33 @@ class FilterBank:
         self.use_mag = use_mag
         self.labels = list(labels) if labels else [f"sensor {i}" for i in range(n_sensors)]
         probe = make_filter(name, rate_hz)
-        spec = _KERNELS.get(type(probe))
+        spec = _SPECS.get(type(probe))
         if probe.params.gyr_range is not None:  # saturation warnings: the object path
             spec = None
-        self._kernel = None if spec is None else spec[0]
-        self._param_row = None if spec is None else spec[1]
-        self._needs_dip = False if spec is None else spec[2]
+        self._spec = spec
         self._dt = probe.params.dt
         acc_range = probe.params.acc_range
         self._acc_range = np.inf if acc_range is None else float(acc_range)
-        k = 0 if self._param_row is None else len(self._param_row(probe))
-        self.Q = np.tile([1.0, 0.0, 0.0, 0.0], (n_sensors, 1))
-        """(S, 4) ``q_world_sensor`` of the sensors in the bank (rows of the others: stale)."""
+        if spec is not None:  # the state's and parameters' sizes: from a started filter
+            probe.update([0.0, 0.0, 0.0], [0.0, 0.0, 9.81], [0.0, 20.0, -40.0])
+        L = 0 if spec is None else len(spec.state(probe))
+        k = 0 if spec is None else len(spec.params(probe))
+        self.X = np.zeros((n_sensors, L))
+        """(S, L) the filter state of the sensors in the bank (rows of the others: unused)."""
         self.P = np.zeros((n_sensors, k))
         self.bias = np.zeros((n_sensors, 3))
         """(S, 3) gyroscope bias removed before the bank's kernel [rad/s]."""
         self.in_bank = np.zeros(n_sensors, dtype=bool)
         self.objects: list[StillStartFilter | None] = [None] * n_sensors
         self._still_s = still_s
-        if self._kernel is not None:  # compile (or load) the kernel now, not on a sample
+        if spec is not None:  # compile (or load) the kernel now, not on a sample
             self._run_kernel(np.zeros(1, np.int64), np.zeros((1, 3)), np.ones((1, 3)), None,
                              np.zeros(1, bool))  # fmt: skip
 
     @property
     def batched(self) -> bool:
         """Whether this filter runs in the bank (else per sensor)."""
-        return self._kernel is not None
+        return self._spec is not None
 
     def _object(self, slot: int) -> StillStartFilter:
         f = self.objects[slot]
@@ -129,12 +166,11 @@ class FilterBank:
         return f
 
     def _maybe_move_in(self, slot: int, f: StillStartFilter) -> None:
-        if self._param_row is None or not f.done or not f.initialised:
+        spec = self._spec
+        if spec is None or not f.done or not f.initialised or not spec.ready(f.inner, self.use_mag):
             return
-        if self._needs_dip and self.use_mag and not np.isfinite(f.inner.state.dip):
-            return  # the object measures the dip at its next magnetometer sample
-        self.Q[slot] = f.inner.state.quat
-        self.P[slot] = self._param_row(f.inner)
+        self.X[slot] = spec.state(f.inner)
+        self.P[slot] = spec.params(f.inner)
         self.bias[slot] = f.bias if f.bias_ok else 0.0
         self.in_bank[slot] = True
         self.objects[slot] = None
@@ -148,9 +184,9 @@ class FilterBank:
         status = np.zeros(m, dtype=np.int8)
         has_mag = self.use_mag and mag is not None
         mag_arr = mag if mag is not None else np.zeros((m, 3))
-        assert self._kernel is not None
-        self._kernel(self.Q, self.P, self.bias, slots, take, gyr, acc, mag_arr, has_mag,
-                     self._dt, self._acc_range, out, status)  # fmt: skip
+        assert self._spec is not None
+        self._spec.kernel(self.X, self.P, self.bias, slots, take, gyr, acc, mag_arr, has_mag,
+                          self._dt, self._acc_range, out, status)  # fmt: skip
         return out, status
 
     def update(

@@ -1,8 +1,9 @@
 """Numba kernels of :class:`mocapkit.imu.filter_bank.FilterBank`: one call advances many
 sensors by one sample each (or a few), with the filters' own per-sample kernels.
 
-Each bank kernel takes the bank's state ``Q`` (S, 4) (row s: sensor s's ``q_world_sensor``,
-updated in place), per-sensor parameters ``P`` (S, k) and gyroscope biases ``bias`` (S, 3),
+Each bank kernel takes the bank's state ``X`` (S, L) (row s: sensor s's filter state, updated
+in place: ``q_world_sensor`` for miller and bachmann, polaris's flat state), per-sensor
+parameters ``P`` (S, k) and gyroscope biases ``bias`` (S, 3),
 and a batch of M samples: ``slots`` (M,) (the sensor of each), ``take`` (M,) (which
 samples are the bank's), ``gyr``, ``acc`` (M, 3), ``mag`` (M, 3) (all-NaN rows: gaps),
 ``has_mag`` (9D), ``dt`` [s] and ``acc_range`` [m/s^2] (inf: unknown). It writes ``out``
@@ -22,6 +23,7 @@ from numba import njit
 from mocapkit.imu.filters.bachmann_kernel import bachmann_run_kernel
 from mocapkit.imu.filters.inputs import MIN_VECTOR_NORM
 from mocapkit.imu.filters.miller_kernel import miller_run_kernel
+from mocapkit.imu.filters.polaris_kernels import polaris_kernel
 
 OK, BAD_GYR, BAD_ACC, BAD_MAG, BAD_OUTPUT = 0, 1, 2, 3, 4
 _SATURATION_FRACTION = 0.999  # as in mocapkit.imu.filters.inputs
@@ -94,7 +96,7 @@ def _finish(r: np.ndarray, m: int, out: np.ndarray, status: np.ndarray) -> None:
 
 @njit(cache=True)
 def miller_bank_kernel(
-    Q: np.ndarray,
+    X: np.ndarray,
     P: np.ndarray,
     bias: np.ndarray,
     slots: np.ndarray,
@@ -123,13 +125,13 @@ def miller_bank_kernel(
         status[m] = st
         if st != OK:
             continue
-        r = miller_run_kernel(Q[s], g1, a1, m1, dt1, use_acc, use_mag, P[s, 0])
+        r = miller_run_kernel(X[s], g1, a1, m1, dt1, use_acc, use_mag, P[s, 0])
         _finish(r, m, out, status)
 
 
 @njit(cache=True)
 def bachmann_bank_kernel(
-    Q: np.ndarray,
+    X: np.ndarray,
     P: np.ndarray,
     bias: np.ndarray,
     slots: np.ndarray,
@@ -159,6 +161,45 @@ def bachmann_bank_kernel(
         if st != OK:
             continue
         r = bachmann_run_kernel(
-            Q[s], g1, a1, m1, dt1, use_acc, use_mag, P[s, 1:4], P[s, 4] > 0.5, P[s, 0]
+            X[s], g1, a1, m1, dt1, use_acc, use_mag, P[s, 1:4], P[s, 4] > 0.5, P[s, 0]
         )
         _finish(r, m, out, status)
+
+
+@njit(cache=True)
+def polaris_bank_kernel(
+    X: np.ndarray,
+    P: np.ndarray,
+    bias: np.ndarray,
+    slots: np.ndarray,
+    take: np.ndarray,
+    gyr: np.ndarray,
+    acc: np.ndarray,
+    mag: np.ndarray,
+    has_mag: bool,
+    dt: float,
+    acc_range: float,
+    out: np.ndarray,
+    status: np.ndarray,
+) -> None:
+    """``polaris`` (started): ``X[s]`` its flat state
+    (:func:`mocapkit.imu.filters.polaris_params.pack_state`), ``P[s]`` its coefficients."""
+    g1 = np.empty((1, 3))
+    a1 = np.empty((1, 3))
+    m1 = np.empty((1, 3))
+    dt1 = np.full(1, dt)
+    use_acc = np.empty(1, dtype=np.bool_)
+    use_mag = np.empty(1, dtype=np.bool_)
+    q9 = np.empty((1, 4))
+    q6 = np.empty((1, 4))
+    aux = np.empty((0, 8))
+    for m in range(slots.shape[0]):
+        if not take[m]:
+            continue
+        s = slots[m]
+        st = _prepare(m, s, gyr, acc, mag, has_mag, bias, acc_range, g1, a1, m1, use_acc, use_mag)
+        status[m] = st
+        if st != OK:
+            continue
+        polaris_kernel(P[s], X[s], g1, a1, m1, dt1, use_acc, use_mag, has_mag, q9, q6, aux)
+        _finish(q9, m, out, status)
