@@ -117,9 +117,7 @@ def _long_rest() -> dict[str, PoseSeries]:
 
 MOTIONS: dict[str, Callable[[], dict[str, PoseSeries]]] = {
     "arm_shapes": _arm_shapes,
-    "walk": lambda: _suit(
-        "walk", ("pelvis", "forearm_r", "thigh_r", "shank_r", "foot_r"), 30.0
-    ),
+    "walk": lambda: _suit("walk", ("pelvis", "forearm_r", "thigh_r", "shank_r", "foot_r"), 30.0),
     "wave": lambda: _suit("wave", ("upper_arm_r", "forearm_r", "hand_r"), 30.0),
     "fast_rotation": _fast_rotation,
     "long_rest": _long_rest,
@@ -298,11 +296,17 @@ def report(rows: list[Row], seconds: float, command: str) -> str:
         lines += _table(rows, names, [(e, lambda r, e=e: r.errors == e) for e in errs], attr)
         lines += ["", f"{title}, consumer-grade, by rate (all motions):", ""]
         cons = [r for r in rows if r.errors == "consumer"] or rows
-        lines += _table(cons, names, [(f"{x:g} Hz", lambda r, x=x: r.rate_hz == x) for x in rates], attr)
+        lines += _table(
+            cons, names, [(f"{x:g} Hz", lambda r, x=x: r.rate_hz == x) for x in rates], attr
+        )
         lines += ["", f"{title}, consumer-grade, by motion (all rates):", ""]
         lines += _table(cons, names, [(m, lambda r, m=m: r.motion == m) for m in motions], attr)
-        lines += ["", f"Cases where each online filter is best (within 2 %): "
-                  f"{_wins(rows, names, attr, online)}.", ""]
+        lines += [
+            "",
+            f"Cases where each online filter is best (within 2 %): "
+            f"{_wins(rows, names, attr, online)}.",
+            "",
+        ]
     return "\n".join(lines)
 
 

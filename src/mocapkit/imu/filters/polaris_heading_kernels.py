@@ -108,6 +108,7 @@ def heading_update(
         r_mag = c[C_MAG_NOISE] * c[C_MAG_NOISE] + (
             c[C_MAG_TIMING] * c[C_MAG_TIMING] * (s[S_MAG_RATE2_SUM] / count)
         )
+        r_mag = r_mag + 0.5 * (s[S_TILT_P] + s[S_TILT_P + 6])
         for r in range(3):
             for col in range(3):
                 acc = 0.0

@@ -119,7 +119,7 @@ class PolarisParams(FilterParams):
     rest_min_time: float = 1.5
     lag_compensation: bool = True
     motion_corr_time: float = 1.0 / (2.0 * math.pi)  # a 1 Hz motion
-    lin_acc_weight: float = 1.0
+    lin_acc_weight: float = 0.5  # BROAD 6D 0.646 (0: 0.630), synthetic limbs better
     mag_noise: float = 0.02  # 0.7 uT of 44 per axis, block-averaged, plus field roughness
     heading_process: float = 0.1 * _DEG  # tuned
     field_process: float = 0.016  # tuned

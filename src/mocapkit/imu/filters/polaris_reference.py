@@ -49,8 +49,9 @@ mean(R6_delayed) h``:
 - (P11) propagate: random walks on ``delta`` and the field, plus the heading drift the
   bias uncertainty allows, ``Jz^T P_b Jz`` (``Jz`` the block integral of ``R6[2]``);
 - (P12) Mahalanobis gate ``nu^T S^-1 nu <= gate^2`` (the measurement noise is
-  ``mag_noise^2 + (mag_timing_sigma_s |w|)^2``, ``|w|^2`` the block mean); accepted:
-  standard EKF update;
+  ``mag_noise^2 + (mag_timing_sigma_s |w|)^2 + var(tilt)``, ``|w|^2`` the block mean,
+  ``var(tilt)`` the mean tilt variance of the inclination filter: a tilt error turns the
+  field in E6 by as much); accepted: standard EKF update;
 - (P13) rejected for ``mag_reset_time``: the hard-iron covariance is reset to
   ``hard_iron_sigma_reset^2`` (a magnet now moves with the sensor) so it is re-learnt while
   the heading is carried by the gyroscope.
@@ -121,7 +122,13 @@ def butterworth_steady_state(c: FloatArray, value: FloatArray) -> FloatArray:
 
 
 def start_core(
-    c: FloatArray, core: PolarisCore, q_init: FloatArray, gyr0: FloatArray, acc0: FloatArray
+    c: FloatArray,
+    core: PolarisCore,
+    q_init: FloatArray,
+    gyr0: FloatArray,
+    acc0: FloatArray,
+    lin2: float = 0.0,
+    n_window: int = 1,
 ) -> None:
     """Initialise ``core`` from an initial ``q_world_sensor`` and the first readings.
 
@@ -129,6 +136,12 @@ def start_core(
     ``q_acc = q_init``. The accelerometer low-pass starts at the gravity direction that
     ``q_init`` implies (with the first reading's norm), the rest low-passes at the first
     readings; the heading filter waits for the first magnetometer sample.
+
+    ``lin2`` [(m/s^2)^2]: the linear acceleration per axis in the ``n_window`` samples
+    ``q_init`` was taken from (:func:`mocapkit.imu.filters.polaris_engine.initial_linear_acc`;
+    0 at rest). It widens the initial tilt uncertainty (to at most 45 deg) and seeds the
+    warm-up's spread (P3a) as ``n_window`` samples' worth, so the first running means,
+    over too few samples to show their own spread, are not trusted as if at rest.
     """
     fresh = PolarisCore()
     for f in fields(PolarisCore):
@@ -139,6 +152,8 @@ def start_core(
     core.acc_lp = a_I.copy()
     core.acc_norm_slow = np.array([a_norm])
     core.lin_mean = np.array([a_norm])
+    core.lin_m2 = np.array([lin2 * n_window])
+    core.lin_var = np.array([max(0.0, lin2 - c[pp.C_LIN_DEADBAND]) * c[pp.C_LIN_WARM]])
     core.acc_lp_state = butterworth_steady_state(c, a_I).reshape(-1)
     core.warmup_count = np.array([1.0])  # q_init counts as the first sample of the mean
     core.drift_J_lp = np.zeros(6)
@@ -146,7 +161,8 @@ def start_core(
     core.rest_gyr_lp = np.asarray(gyr0, dtype=np.float64).copy()
     core.rest_acc_lp = np.asarray(acc0, dtype=np.float64).copy()
     P = np.zeros((5, 5))
-    P[0, 0] = P[1, 1] = c[pp.C_TILT_SIGMA_INIT] ** 2
+    tilt_var = c[pp.C_TILT_SIGMA_INIT] ** 2 + lin2 / pp.GRAVITY**2
+    P[0, 0] = P[1, 1] = min(tilt_var, (0.25 * math.pi) ** 2)
     P[2, 2] = P[3, 3] = P[4, 4] = c[pp.C_BIAS_SIGMA_INIT] ** 2
     core.tilt_P = P.reshape(-1)
     core.started = np.array([1.0])
@@ -334,7 +350,10 @@ def _heading_update(c: FloatArray, core: PolarisCore) -> None:
         H[:, 3:6] = R_mean
         PHt = P @ H.T
         rate2 = float(core.mag_rate2_sum[0]) / count
-        S = H @ PHt + np.eye(3) * (c[pp.C_MAG_NOISE] ** 2 + c[pp.C_MAG_TIMING] ** 2 * rate2)
+        # the field in E6 also turns with the tilt error of the 6D estimate
+        tilt_var = 0.5 * (core.tilt_P[0] + core.tilt_P[6])
+        r_mag = c[pp.C_MAG_NOISE] ** 2 + c[pp.C_MAG_TIMING] ** 2 * rate2 + tilt_var
+        S = H @ PHt + np.eye(3) * r_mag
         # A broken-down state (S not positive definite) counts as rejected.
         positive = np.linalg.det(S) > 0.0
         S_inv = np.linalg.inv(S) if positive else np.zeros((3, 3))
