@@ -100,7 +100,7 @@ def _fast_rotation() -> dict[str, PoseSeries]:
     w = np.radians(350.0) * env[:, None] * np.sin(2 * np.pi * freqs * t[:, None] + [0, 1, 2])
     q = _integrate(w, quat_from_axis_angle(np.array([1.0, 1.0, 0.0]), 0.4))
     pos = 0.15 * env[:, None] * np.sin(2 * np.pi * np.array([0.7, 1.1, 0.9]) * t[:, None])
-    return {"hand_held": PoseSeries(t, q, pos + [0.0, 0.0, 1.2], name="hand_held")}
+    return {"hand_held": PoseSeries(t, q, pos + np.array([0.0, 0.0, 1.2]), name="hand_held")}
 
 
 def _long_rest() -> dict[str, PoseSeries]:
@@ -112,7 +112,7 @@ def _long_rest() -> dict[str, PoseSeries]:
     axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
     q = _integrate(rate[:, None] * axis, quat_from_axis_angle(np.array([1.0, 0.2, 0.0]), 0.5))
     pos = 0.3 * _smoothstep(u)[:, None] * np.array([1.0, 0.5, 0.2])
-    return {"resting": PoseSeries(t, q, pos + [0.0, 0.0, 1.0], name="resting")}
+    return {"resting": PoseSeries(t, q, pos + np.array([0.0, 0.0, 1.0]), name="resting")}
 
 
 MOTIONS: dict[str, Callable[[], dict[str, PoseSeries]]] = {
