@@ -232,6 +232,13 @@ class OrientationFilter(ABC):
         self._after_reinitialize()
         return self.quat
 
+    def gyr_bias_removed(self, bias: Any, sigma: float | None = None) -> None:  # noqa: B027
+        """Tell the filter that the caller subtracts ``bias`` [rad/s] (3,) from every later
+        gyroscope reading (a bias measured at rest, e.g. in a calibration pose), with
+        uncertainty ``sigma`` [rad/s] if known. A filter that estimates the bias shifts its
+        estimate by ``-bias`` (and may take ``sigma`` as a measurement of what is left);
+        the others have nothing to do (this default)."""
+
     def _after_reinitialize(self) -> None:  # noqa: B027  (an optional hook)
         """Hook for subclasses that keep more state tied to the orientation."""
 
