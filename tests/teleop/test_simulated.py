@@ -49,6 +49,14 @@ def test_the_sender_streams_chunks_fed_after_the_start() -> None:
         result = sender.wait(10.0)
     assert got == [f"a{k}".encode() for k in range(40)]  # all of them, in order
     assert result["sent"] == 40
+    with pytest.raises(MocapkitError, match="the suit sender process has stopped"):
+        sender.feed([(1.0, b"late")])
+
+
+def test_a_session_that_is_not_started_says_so() -> None:
+    sim = SimulatedSession(SimulatedConfig(shapes=("box",), shape_s=1.0))
+    with pytest.raises(MocapkitError, match="the simulated session is not started"):
+        sim.engage()
 
 
 @pytest.mark.slow

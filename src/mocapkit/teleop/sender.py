@@ -179,12 +179,14 @@ class TimelineSender:
             raise ConfigError("feed: start the sender with go(stream=True) first")
         if not items:
             return
-        assert self.proc.stdin is not None
+        stdin = self.proc.stdin
+        if stdin is None or stdin.closed or self.proc.poll() is not None:
+            raise MocapkitError("the suit sender process has stopped; start a new one")
         try:
-            self.proc.stdin.write(_chunk(items))
-            self.proc.stdin.flush()
+            stdin.write(_chunk(items))
+            stdin.flush()
         except BrokenPipeError as exc:
-            raise MocapkitError("the suit sender process has stopped") from exc
+            raise MocapkitError("the suit sender process has stopped; start a new one") from exc
 
     def end(self) -> None:
         """No more frames: the child sends what it has and reports."""

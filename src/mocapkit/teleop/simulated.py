@@ -49,10 +49,12 @@ from mocapkit.teleop.server import RobotServerProcess, ServerConfig, spawn_robot
 
 log = logging.getLogger("mocapkit.teleop.simulated")
 
-#: Host-side filters in order of preference for the simulated chains, by measured accuracy
-#: through the real chain (docs/benchmarks.md, circle, consumer-grade errors, still start
-#: and calibrated magnetometers): bachmann 2.5 mm end-effector RMSE, miller 3.2 mm, polaris
-#: 3.8 mm. polaris moves first once it wins on simulated data.
+#: Host-side filters in order of preference for the simulated chains, by the measured
+#: end-effector error through the live session in the demo's set-up (infinity,
+#: right_arm_torso_3, fused on the host with a still start, consumer-grade errors,
+#: calibrated magnetometers; seeds 0 and 1; docs/benchmarks.md): bachmann 2.5 / 4.5 mm,
+#: miller 2.7 / 4.6 mm, polaris 8.9 / 10.1 mm. polaris wins on BROAD and on longer
+#: simulated motions but not yet here; it moves first once it does.
 PREFERRED_FILTERS = ("bachmann", "polaris", "miller")
 _AHEAD_S = 8.0  # frames handed to the sender ahead of the clock [s]
 _CHUNK_S = 2.0  # ... in chunks of this much motion [s]
