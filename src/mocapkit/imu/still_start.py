@@ -8,9 +8,10 @@ rest is its bias: after ``still_s`` seconds of samples the bias is that mean, th
 filter's orientation is re-resolved from the window's mean directions
 (:meth:`OrientationFilter.reinitialize`), and from then on every gyroscope sample has the
 bias removed; a filter that estimates the bias itself is told
-(:meth:`OrientationFilter.gyr_bias_removed`, with the window's standard error). Neither miller nor bachmann estimates a gyroscope bias: uncorrected, a
-consumer-grade bias of 0.01 rad/s turns into several degrees of slowly varying error
-(the filters' time constants are 6-9 s), which teleoperation sees as drift.
+(:meth:`OrientationFilter.gyr_bias_removed`, with the window's standard error). Neither
+miller nor bachmann estimates a gyroscope bias: uncorrected, a consumer-grade bias of
+0.01 rad/s turns into several degrees of slowly varying error (the filters' time constants
+are 6-9 s), which teleoperation sees as drift.
 
 If the gyroscope moved during the window (its mean rate above ``max_motion_rad_s``, more
 than any plausible bias, or any sample that far from the mean), the window is not a

@@ -90,6 +90,13 @@ def _pose_lists(T: Any) -> tuple[list[float], list[float]]:
     return [float(T[0, 3]), float(T[1, 3]), float(T[2, 3])], [float(v) for v in q]
 
 
+def _transitions(trs: list[Transition]) -> list[dict[str, Any]]:
+    return [
+        {"t": tr.t, "from": tr.source.value, "to": tr.target.value, "reason": tr.reason}
+        for tr in trs
+    ]
+
+
 def _pose_dict(T: Any) -> dict[str, list[float]] | None:
     if T is None:
         return None
@@ -232,11 +239,12 @@ class LiveSession:
     def snapshot(self) -> dict[str, Any]:
         """The session's status (see the module docstring); plain JSON-ready values."""
         snap = dict(self._snap)
-        # these two change on operator commands: current values, not the last publication
+        # these change on operator commands: current values, not the last publication
         snap["state"] = self.session.state.value if self.receiver is not None else "stopped"
         snap["calibration"] = self._calibration_state
         snap["calibrated"] = self.pipeline.body is not None
         snap["message"] = self._message
+        snap["transitions"] = _transitions(self.session.transitions[-10:])
         if self.receiver is not None:
             st = self.receiver.stats()
             names = {v: k for k, v in self.pipeline.sensor_ids.items()}
@@ -355,10 +363,7 @@ class LiveSession:
             "state": self.session.state.value,
             "calibration": self._calibration_state,
             "fault": p.last_fault,
-            "transitions": [
-                {"t": tr.t, "from": tr.source.value, "to": tr.target.value, "reason": tr.reason}
-                for tr in trs
-            ],
+            "transitions": _transitions(trs),
             "latency_ms": {
                 "p50": float(np.percentile(lat, 50)) if lat.size else None,
                 "p99": float(np.percentile(lat, 99)) if lat.size else None,

@@ -16,6 +16,7 @@ import numpy as np
 
 from mocapkit.body.sensor_tree import SensorTree
 from mocapkit.errors import ConfigError
+from mocapkit.series import PoseSeries
 from mocapkit.teleop.operator import (
     SHAPES,
     OperatorMotion,
@@ -128,3 +129,20 @@ def operator_cycle(
         (first.t_start, first.t_end),
     )
     return OperatorCycle(motion, tuple(spans))
+
+
+def arm_sensor_poses(
+    shapes: tuple[str, ...],
+    rate_hz: float = 100.0,
+    shape_s: float = 6.0,
+    seed: int = 0,
+    preset: str = "right_arm_torso_3",
+) -> dict[str, PoseSeries]:
+    """The sensors' true poses (``q_world_sensor``, position) over one cycle of the
+    operator tracing ``shapes`` (by sensor name; mountings 5 deg off, drawn with ``seed``,
+    10 cm down each segment: :func:`mocapkit.teleop.operator_suit.sensor_poses`): arm
+    motion for testing orientation filters on body segments."""
+    from mocapkit.teleop.operator_suit import sensor_poses
+
+    cycle = operator_cycle(shapes, SensorTree.preset(preset), rate_hz, shape_s)
+    return sensor_poses(cycle.motion, np.random.default_rng(seed))

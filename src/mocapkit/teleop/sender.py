@@ -175,13 +175,15 @@ class TimelineSender:
         ``go(stream=True)``. An empty list is ignored (:meth:`end` ends the stream)."""
         from mocapkit.errors import ConfigError, MocapkitError  # (the child: stdlib only)
 
-        if not self._streaming:
-            raise ConfigError("feed: start the sender with go(stream=True) first")
-        if not items:
-            return
         stdin = self.proc.stdin
         if stdin is None or stdin.closed or self.proc.poll() is not None:
             raise MocapkitError("the suit sender process has stopped; start a new one")
+        if not self._streaming:
+            raise ConfigError(
+                "feed: start the sender with go(stream=True) first (and before end())"
+            )
+        if not items:
+            return
         try:
             stdin.write(_chunk(items))
             stdin.flush()
