@@ -9,8 +9,9 @@ body segments, with the linear accelerations of limbs, at other rates and sensor
 Motions (``MOTIONS``, each sampled at 400 Hz and decimated, so every rate sees the same
 motion and the truth is exact at every sample):
 
-- ``arm_shapes``: the teleoperation operator (:mod:`mocapkit.demo.operator_cycle`) tracing
-  infinity, circle and box (upper arm, forearm, and the chest sensor, which stays still);
+- ``arm_shapes``: the teleoperation operator (:mod:`mocapkit.teleop.operator_cycle`, the
+  body model) tracing infinity, circle and box (upper arm, forearm, and the torso sensor,
+  which stays still);
 - ``walk``: limbs of the suit's walking motion (:mod:`mocapkit.suit.motions`: pelvis,
   forearm, thigh, shank, foot), moving from the first sample;
 - ``wave``: the suit's waving arm (upper arm, forearm, hand), moving from the first sample;
@@ -40,13 +41,13 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapkit.demo.operator_cycle import operator_cycle
 from mocapkit.geometry import quat_exp, quat_from_axis_angle, quat_mul, quat_normalize
 from mocapkit.imu.filters import Polaris, available_filters, make_filter
 from mocapkit.imu.metrics import orientation_rmse
 from mocapkit.imu.simulate import ImuErrorModel, MagDisturbance, simulate_imu
 from mocapkit.series import ImuRecording, PoseSeries
 from mocapkit.suit.motions import FULL_BODY_SEGMENTS, suit_poses
+from mocapkit.teleop.operator_cycle import arm_sensor_poses
 
 REPO = Path(__file__).resolve().parents[1]
 BASE_RATE = 400.0
@@ -58,9 +59,9 @@ HEADING = "## Orientation filters on simulated suits"
 
 # -- motions ---------------------------------------------------------------------------------
 def _arm_shapes() -> dict[str, PoseSeries]:
-    m = operator_cycle(("infinity", "circle", "box"), BASE_RATE, 6.0, seed=0)
-    names = {1: "upper_arm", 2: "forearm", 3: "chest"}
-    return {names[sid]: p for sid, p in m.sensor_poses.items()}
+    poses = arm_sensor_poses(("infinity", "circle", "box"), BASE_RATE, 6.0, seed=0)
+    names = {"upper_arm_r": "upper_arm", "forearm_r": "forearm", "torso": "chest"}
+    return {names[name]: p for name, p in poses.items()}
 
 
 def _suit(motion: str, segments: tuple[str, ...], duration_s: float) -> dict[str, PoseSeries]:

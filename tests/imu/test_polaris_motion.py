@@ -8,13 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from mocapkit.demo.operator_cycle import operator_cycle
 from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.imu.filters import Polaris, make_filter
 from mocapkit.imu.metrics import orientation_rmse
 from mocapkit.imu.simulate import ImuErrorModel, simulate_imu
 from mocapkit.series import ImuRecording, PoseSeries
 from mocapkit.suit.motions import suit_poses
+from mocapkit.teleop.operator_cycle import arm_sensor_poses
 
 RATE = 100.0
 
@@ -42,26 +42,33 @@ def test_a_limb_that_starts_walking_does_not_diverge() -> None:
     assert incl < 7.5
 
 
-@pytest.mark.parametrize("sensor", [1, 2])  # upper arm, forearm
-def test_arm_motion_with_consumer_noise_beats_bachmann(sensor: int) -> None:
-    # The teleoperation operator tracing the infinity (10 s: rest 1 s, reach, shape, hold)
-    # at 100 Hz with consumer-grade errors (0.57 deg/s gyroscope bias left in the readings).
-    # Measured (9D total / 6D inclination, deg): upper arm polaris 1.60 / 0.55, bachmann
-    # 3.15 / 2.93; forearm polaris 1.73 / 0.95, bachmann 2.27 / 1.37. Bounds: 1.5 x ours
+#: (9D total, 6D inclination) bounds [deg]: 1.5 x the measured values below
+_ARM_BOUNDS = {"upper_arm_r": (1.0, 0.3), "forearm_r": (4.8, 0.4)}
+
+
+@pytest.mark.parametrize("sensor", ["upper_arm_r", "forearm_r"])
+def test_arm_motion_with_consumer_noise_beats_bachmann(sensor: str) -> None:
+    # The teleoperation operator (the body model, mocapkit.teleop.operator_cycle) tracing
+    # the infinity (N-pose 2 s, reach, settle, shape, hold, return: 14 s) at 100 Hz with
+    # consumer-grade errors (gyroscope bias left in the readings, magnetometer hard and
+    # soft iron uncalibrated). Measured (9D total / 6D inclination, deg): upper arm polaris
+    # 0.65 / 0.17, bachmann 2.51 / 0.43; forearm polaris 3.17 / 0.24, bachmann 3.62 / 2.20
+    # (the forearm's 9D error is mostly heading, for every filter). Bounds: 1.5 x ours
     # (noise is seeded, so only a change of the filter moves them), and below bachmann.
-    pose = operator_cycle(("infinity",), RATE, 6.0, seed=0).sensor_poses[sensor]
+    pose = arm_sensor_poses(("infinity",), RATE, 6.0, seed=0)[sensor]
     rec = simulate_imu(pose, ImuErrorModel.consumer_grade(), rng=np.random.default_rng(5))
     total, incl = _errors_deg("polaris", rec, pose)
     total_b, incl_b = _errors_deg("bachmann", rec, pose)
-    assert total < 2.6
-    assert incl < 1.5
+    max_total, max_incl = _ARM_BOUNDS[sensor]
+    assert total < max_total
+    assert incl < max_incl
     assert total < total_b
     assert incl < incl_b
 
 
 def test_bias_removed_by_the_caller_shifts_the_estimate() -> None:
     # Subtracting b from the readings and telling the filter is the same run (to rounding).
-    pose = operator_cycle(("circle",), RATE, 6.0, seed=1).sensor_poses[2]
+    pose = arm_sensor_poses(("circle",), RATE, 6.0, seed=1)["forearm_r"]
     rec = simulate_imu(pose, ImuErrorModel.consumer_grade(), rng=np.random.default_rng(3))
     b = np.array([0.004, -0.007, 0.002])
     one = Polaris(rate_hz=RATE).run(rec.gyr, rec.acc, rec.mag)
