@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import subprocess
 import sys
@@ -74,7 +75,8 @@ def main(argv: list[str] | None = None) -> int:
     lines = [
         "Command: `python -m benchmarks.demo_timing` (runs `mocapkit demo --json` in a fresh "
         f"process {args.runs} times). Measured on {platform.machine()} / Python "
-        f"{platform.python_version()}, 2 cores shared with other jobs: provisional.",
+        f"{platform.python_version()}, 2 cores shared with other jobs (load average "
+        f"{os.getloadavg()[0]:.1f} at the end): provisional.",
         "",
         "| run | wall [s] | teleop [s] | markers [s] | imu [s] | report [s] |",
         "|---|---|---|---|---|---|",
@@ -84,12 +86,14 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"| {k + 1} | {wall:.1f} | " + " | ".join(cells) + " |")
     lines += [
         "",
-        "The teleoperation section runs in real time (rest, reach, a 6 s shape, hold: about "
-        "10 s of motion) plus the robot server's start; the wall time includes Python's and "
+        "The teleoperation section runs in real time through the live session (N-pose 2 s, "
+        "reach 2 s, settle 1 s, a 6 s shape, hold 1 s: 12 s of motion) plus the operator's "
+        "IK, the robot server's and the sender's start; the wall time includes Python's and "
         "numba's start-up.",
         "",
-        f"Demo teleoperation figures (shape {t.get('shape')}, filter {t.get('filter')}, "
-        "consumer-grade IMU noise):",
+        f"Demo teleoperation figures of the last run (shape {t.get('shape')}, "
+        f"{t.get('preset')}, filter {t.get('filter')} on the {t.get('fusion')}, "
+        "consumer-grade IMU errors):",
         "",
         "| figure | value |",
         "|---|---|",
@@ -100,6 +104,8 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(f"| {key} | {'n/a' if v is None else f'{v:.2f}'} |")
     for coord, v in t.get("joint_rmse_deg", {}).items():
         lines.append(f"| joint RMSE {coord} [deg] | {v:.2f} |")
+    for sensor, v in t.get("filter_rmse_deg", {}).items():
+        lines.append(f"| filter RMSE {sensor} [deg] | {v:.2f} |")
     text = "\n".join(lines)
     print(text)
     if not args.no_write:

@@ -3,6 +3,7 @@ the real chain.
 
     python -m benchmarks.teleop_pipeline                  # everything below (~5 min)
     python -m benchmarks.teleop_pipeline --only pipeline  # the 15-sensor timing only
+    python -m benchmarks.teleop_pipeline --only fusion    # host-side fusion per round
     python -m benchmarks.teleop_pipeline --only shapes --filter bachmann
 
 1. ``pipeline``: 15 sensors at 100 Hz (the ``full_body_15`` tree, the paper's maximum),
@@ -15,7 +16,9 @@ the real chain.
    the command's send, over every command of the run. Also the per-packet CPU cost of
    ``TeleopPipeline.process`` alone, paced at 100 Hz in one process (no sockets but the
    robot link's).
-2. ``shapes``: the six shapes through the real chain (``right_arm_2``, the paper's two
+2. ``fusion``: host-side fusion of one round of 15 RAW samples, the filter bank against
+   one still-start filter object per sensor.
+3. ``shapes``: the six shapes through the real chain (``right_arm_2``, the paper's two
    sensors; consumer-grade IMU errors; on-node filters), with the ideal chain (the true
    orientations on the wire) as an ablation.
 """
@@ -34,6 +37,9 @@ from mocapkit.body.calibration import q_world_ground
 from mocapkit.body.joint_angles import compose_pose
 from mocapkit.body.sensor_tree import SensorTree
 from mocapkit.geometry import quat_exp, quat_mul
+from mocapkit.imu.filter_bank import FilterBank
+from mocapkit.imu.filters import make_filter
+from mocapkit.imu.still_start import StillStartFilter
 from mocapkit.robot.model import pose_parts
 from mocapkit.suit.protocol import Kind
 from mocapkit.suit.samples import SuitSample
@@ -66,8 +72,10 @@ def process_cost(n_packets: int = 3000, preset: str = "full_body_15") -> dict[st
                 [SuitSample(i + 1, 0, 0.0, 0, Kind.ORIENTATION, q0[i]) for i in range(n)], now
             )
             time.sleep(0.005)
-        T, _ = pipe.model_pose(time.monotonic())
-        assert T is not None
+        now = time.monotonic()  # fresh data: a loaded machine may have slept > 0.1 s
+        pipe.ingest([SuitSample(i + 1, 0, 0.0, 0, Kind.ORIENTATION, q0[i]) for i in range(n)], now)
+        T, fault = pipe.model_pose(now)
+        assert T is not None, fault
         pos, quat = pose_parts(T)
         session.engage(time.monotonic())
         rng = np.random.default_rng(0)
@@ -100,6 +108,35 @@ def process_cost(n_packets: int = 3000, preset: str = "full_body_15") -> dict[st
             "p99_us": float(np.percentile(a, 99)), "max_us": float(a.max())}  # fmt: skip
 
 
+def fusion_cost(name: str, n_rounds: int = 2000, n_sensors: int = 15) -> dict[str, object]:
+    """Host-side fusion of one round (one RAW sample per sensor) [us]: the pipeline's
+    ``FilterBank`` (one numba call per round for filters with a bank kernel) against one
+    ``StillStartFilter`` per sensor (a Python call per sample), back to back after the
+    still start."""
+    rng = np.random.default_rng(0)
+    acc = np.array([0.0, 0.0, 9.81]) + rng.normal(0, 0.05, (n_rounds, n_sensors, 3))
+    mag = np.array([0.0, 20.0, -40.0]) + rng.normal(0, 0.3, (n_rounds, n_sensors, 3))
+    gyr = rng.normal(0, 0.005, (n_rounds, n_sensors, 3))
+    slots = np.arange(n_sensors)
+    bank = FilterBank(name, 100.0, n_sensors, still_s=0.8)
+    objs = [StillStartFilter(make_filter(name, 100.0), 0.8) for _ in range(n_sensors)]
+    warm = 100  # the still start (80 samples) and the first rounds after it
+    t_bank, t_obj = [], []
+    for k in range(n_rounds):
+        t = time.perf_counter_ns()
+        bank.update(slots, gyr[k], acc[k], mag[k])
+        t_bank.append(time.perf_counter_ns() - t)
+        t = time.perf_counter_ns()
+        for i, f in enumerate(objs):
+            f.update(gyr[k, i], acc[k, i], mag[k, i])
+        t_obj.append(time.perf_counter_ns() - t)
+    b, o = np.array(t_bank[warm:]) / 1e3, np.array(t_obj[warm:]) / 1e3
+    return {"filter": name, "sensors": n_sensors, "batched": bank.batched,
+            "bank_us_p50": float(np.percentile(b, 50)), "bank_us_p99": float(np.percentile(b, 99)),
+            "per_sensor_us_p50": float(np.percentile(o, 50)),
+            "per_sensor_us_p99": float(np.percentile(o, 99))}  # fmt: skip
+
+
 def pipeline_15(fusion: str, shape_s: float) -> dict[str, object]:
     r = evaluate_shape(
         "circle",
@@ -113,7 +150,7 @@ def pipeline_15(fusion: str, shape_s: float) -> dict[str, object]:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--only", choices=["pipeline", "shapes"], default=None)
+    ap.add_argument("--only", choices=["pipeline", "fusion", "shapes"], default=None)
     ap.add_argument("--filter", default="miller")
     ap.add_argument("--fusion", default="node", choices=["node", "host"])
     ap.add_argument("--retarget", default="segments", choices=["segments", "map"])
@@ -121,6 +158,9 @@ def main() -> None:
     ap.add_argument("--no-ideal", action="store_true", help="skip the ideal-chain ablation")
     args = ap.parse_args()
     print(json.dumps({"load_average": os.getloadavg()}))
+    if args.only in (None, "fusion"):
+        for name in ("miller", "bachmann", "polaris"):
+            print(json.dumps({"host_fusion_15_sensors": fusion_cost(name)}))
     if args.only in (None, "pipeline"):
         print(json.dumps({"process_cost_15_sensors": process_cost()}))
         for fusion in ("node", "host"):

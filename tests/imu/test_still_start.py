@@ -86,3 +86,22 @@ def test_zero_duration_passes_through_and_reset_starts_over():
     f.reset()
     assert not f.done
     np.testing.assert_allclose(f.run(gyr, acc, mag), first, atol=1e-12)
+
+
+def test_a_bias_estimating_filter_is_told_what_the_still_start_removes():
+    from mocapkit.imu.filters.miller import MillerFilter, MillerParams
+
+    calls = []
+
+    class Spy(MillerFilter):
+        def gyr_bias_removed(self, bias, sigma=None):
+            calls.append((np.array(bias), sigma))
+
+    rng = np.random.default_rng(4)
+    _, gyr, acc, mag = _still_then_turn(100, 50, rng)
+    f = StillStartFilter(Spy(MillerParams(rate_hz=RATE)), still_s=1.0)
+    f.run(gyr, acc, mag)
+    assert len(calls) == 1  # once, when the window is full
+    np.testing.assert_array_equal(calls[0][0], f.bias)
+    # the standard error of the window's mean: 0.003 rad/s noise over 100 samples
+    assert calls[0][1] == pytest.approx(0.003 / np.sqrt(100), rel=0.2)

@@ -268,5 +268,15 @@ def test_faults_through_the_real_chain_hold_say_why_and_recover():
         i = r.transitions.index(next(t for t in r.transitions if held[k] in t))
         assert r.transitions[i + 1] == "held->aligning: fault cleared"
         assert r.transitions[i + 2].startswith("aligning->engaged")
+    # the stretched shape: either the server's IK reports the target out of reach while it
+    # is still close (the session keeps following, with that note), or the target runs away
+    # faster than that (the session stops following and says how far); which one comes first
+    # depends on the scheduling of the server's answer, so either is accepted with its reason
     notes = [n for f in lives[0].pipeline.frames for n in f.notes]
-    assert any(n.startswith("target out of reach") for n in notes)
+    short = any(n.startswith("target out of reach") for n in notes)
+    away = [t for t in r.transitions if "engaged->aligning: robot cannot follow: " in t]
+    assert short or away
+    for t in away:
+        assert t.endswith(" deg away")
+        i = r.transitions.index(t)
+        assert r.transitions[i + 1].split("->")[1].split(":")[0] in ("engaged", "held")

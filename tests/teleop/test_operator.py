@@ -142,3 +142,35 @@ def test_server_start_posture_option():
     assert cfg.q_start[0] == pytest.approx(np.radians(10.0))
     with pytest.raises(ConfigError, match="--q-start-deg: expected comma-separated degrees"):
         config_from_args(p.parse_args(["--q-start-deg", "ten"]))
+
+
+def test_the_cycle_chains_shapes_without_a_jump_and_loops():
+    """Shapes one after the other, each back to the N-pose: the coordinates never jump,
+    not even from the cycle's last frame to its first (it repeats)."""
+    from mocapkit.teleop.operator import npose_coordinates
+    from mocapkit.teleop.operator_cycle import operator_cycle
+
+    tree = SensorTree.preset("right_arm_torso_3")
+    c = operator_cycle(("vertical", "circle"), tree, shape_s=1.0, return_s=1.0)
+    m = c.motion
+    values = m.coordinates.values
+    assert [s.shape for s in c.spans] == ["vertical", "circle"]
+    assert c.period_s == pytest.approx(len(m.time) / 100.0)
+    # 10 ms steps: the fastest coordinate (the elbow in the reach) moves < 2 deg per step;
+    # a jump between shapes or at the seam would be tens of degrees
+    steps = np.abs(np.diff(np.vstack([values, values[:1]]), axis=0))
+    assert np.degrees(steps.max()) < 2.0
+    np.testing.assert_allclose(values[0], npose_coordinates(tree), atol=1e-12)
+    np.testing.assert_allclose(values[-1], npose_coordinates(tree), atol=1e-12)
+    for s in c.spans:  # the calibration windows are still, the shapes are not
+        w = (m.time >= s.calib_window[0]) & (m.time <= s.calib_window[1])
+        assert np.ptp(values[w], axis=0).max() == 0.0
+        sh = (m.time >= s.t_start) & (m.time <= s.t_end)
+        assert np.ptp(m.hand[sh], axis=0).max() > 0.05  # [m] a 10 cm shape
+        assert s.calib_window[1] < s.engage_t < s.t_start < s.t_end
+    assert c.span_at(c.spans[1].t_start + 0.1 + c.period_s) == c.spans[1]  # any cycle
+    assert c.span_at(0.0) is None  # in the N-pose
+    with pytest.raises(ConfigError, match="shapes: expected some of vertical"):
+        operator_cycle(("spiral",))
+    with pytest.raises(ConfigError, match="rate_hz, shape_s and return_s: expected positive"):
+        operator_cycle(("box",), return_s=0.0)

@@ -174,10 +174,22 @@ def test_host_fusion_turns_raw_samples_into_orientations():
     for k in range(40):
         s = [SuitSample(i, k, k * 0.01, 0, Kind.RAW, None, np.zeros(3), acc, mag) for i in (1, 2)]
         assert pipe.ingest(s, k * 0.01) == 0  # every sample contributed (arrival 0 ns)
-    f = pipe.fusion[0]
-    assert f.done
-    assert f.bias_ok
+    bank = pipe.fusion
+    assert bank is not None
+    assert bank.batched  # miller: both sensors advanced in one numba call per batch
+    assert bank.in_bank.all()  # the still start is done: the state moved into the bank
+    np.testing.assert_array_equal(bank.bias, 0.0)  # a bias-free gyroscope at rest
     np.testing.assert_allclose(pipe.q_sensor[0], [1.0, 0.0, 0.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(pipe.t_sample, 0.39)  # the samples' own sensor times
+    # a non-finite gyroscope sample: the sensor is faulted with the reason, not fused
+    bad = [SuitSample(1, 40, 0.4, 0, Kind.RAW, None, np.full(3, np.nan), acc, mag)]
+    pipe.ingest(bad, 0.4)
+    assert pipe.sensor_fault(0.4) == (
+        "sensor upper_arm_r (id 1): host fusion failed (gyr: non-finite value)"
+    )
+    good = [SuitSample(1, 41, 0.41, 0, Kind.RAW, None, np.zeros(3), acc, mag)]
+    pipe.ingest(good, 0.41)
+    assert pipe.sensor_fault(0.41) is None  # recovers with the next good sample
 
 
 class _FakeLink:

@@ -117,7 +117,12 @@ def test_a_status_mapping_becomes_a_snapshot() -> None:
         "ee_commanded": None,
         "ee_actual": {"pos": [0.6, -0.3, -0.1], "quat": [1.0, 0.0, 0.0, 0.0]},
         "packet_loss": 0.25,
-        "sensors": {"forearm_r": {"delivered": 30}, "upper_arm_r": {"delivered": 40}},
+        "sensors": {
+            "forearm_r": {"delivered": 30, "segment": "radius_r", "quat": [0.0, 1.0, 0.0, 0.0]},
+            "upper_arm_r": {"delivered": 40, "segment": "humerus_r", "quat": None},
+        },
+        "segments": [{"name": "radius_r", "start": [0.0, -0.2, 1.1], "end": [0.0, -0.2, 0.9],
+                      "quat": [1.0, 0.0, 0.0, 0.0]}],
     }  # fmt: skip
     s = LiveSnapshot.from_mapping(d)
     assert s.state == "held"
@@ -132,6 +137,12 @@ def test_a_status_mapping_becomes_a_snapshot() -> None:
     assert s.ee_actual is not None
     np.testing.assert_allclose(s.ee_actual[:3, 3], [0.6, -0.3, -0.1])
     assert s.transitions == ("engaged -> held: sensor 2 stale",)
+    assert [seg.name for seg in s.segments] == ["radius_r"]
+    # a sensor with an orientation is drawn in the middle of its (drawn) segment; one
+    # without (lost) is not
+    assert [sp.name for sp in s.sensors] == ["forearm_r"]
+    np.testing.assert_allclose(s.sensors[0].position, [0.0, -0.2, 1.0])
+    np.testing.assert_allclose(s.sensors[0].q_world_sensor, [0.0, 1.0, 0.0, 0.0])
     assert s.message.startswith("sensor 2: stale for 0.31 s")
 
     class MappingSession(RecordedSession):
@@ -144,3 +155,27 @@ def test_a_status_mapping_becomes_a_snapshot() -> None:
     with TeleopViewer(MappingSession(_snapshot()), port=free_port()) as v:
         assert v.update().state == "held"
         assert v.command("engage") == "engage: done"
+
+
+@pytest.mark.slow
+def test_viewer_cli_serves_a_live_session_and_prints_its_figures(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """``mocapkit viewer --seconds`` in-process: the simulated session streams, calibrates
+    itself in the N-pose, nobody engages; the summary says so."""
+    import json
+
+    from mocapkit.cli.main import main
+
+    port = free_port()
+    argv = ["viewer", "--seconds", "3", "--port", str(port), "--shapes", "circle", "--json"]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["url"] == f"http://127.0.0.1:{port}/"
+    assert out["filter"] == "bachmann"
+    assert out["state"] == "disabled"  # the viewer's operator engages with the button
+    assert out["packets"] > 3 * 100  # three sensors at 100 Hz for about 3 s
+    assert out["packet_loss"] == 0.0  # loopback
+    assert out["commands"] == []
+    assert out["latency_ms_p50"] is None  # no command sent: no pipeline time
+    assert 2.5 < out["seconds"] < 10.0

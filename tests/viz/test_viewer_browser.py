@@ -1,7 +1,8 @@
 """The live viewer in a real headless Chromium: open the page, click, check a screenshot.
 
-The session is the real simulated chain (suit over UDP, receiver, filters, body model,
-retargeting, robot-server process); the browser is Debian's Chromium through chromedriver.
+The session is the live teleoperation session (``mocapkit.teleop.live``) fed by a simulated
+suit (a sender process over UDP, receiver, host-side filters, body model, retargeting,
+robot-server process); the browser is Debian's Chromium through chromedriver.
 """
 
 from __future__ import annotations
@@ -12,7 +13,8 @@ from typing import Any
 
 import pytest
 
-from mocapkit.demo.suit_chain import ChainConfig, SuitTeleopChain
+from mocapkit.teleop.simulated import SimulatedConfig, SimulatedSession
+from mocapkit.viz.live_api import LiveSnapshot
 from tests.viz.browser import chromium, color_pixels, free_port, png_rgb, save_artifact
 
 pytest.importorskip("viser", reason="the viewer needs the viz extra (pip install -e '.[viz]')")
@@ -57,33 +59,45 @@ def _button(driver: Any, label: str) -> Any:
 
 @pytest.mark.slow
 def test_viewer_page_buttons_drive_the_session_and_the_scene_renders(chromium: Any) -> None:
-    chain = SuitTeleopChain(ChainConfig(shapes=("circle",), duration_s=90.0))
-    with chain, TeleopViewer(chain, port=free_port()) as viewer:
+    sim = SimulatedSession(SimulatedConfig(shapes=("circle",)))
+
+    def snap() -> LiveSnapshot:
+        return LiveSnapshot.from_mapping(sim.snapshot())
+
+    with sim, TeleopViewer(sim, port=free_port()) as viewer:
         viewer.start()
         chromium.get(viewer.url)
         engage = _wait(lambda: _button(chromium, "Engage"), 60, "the Engage button")
         _wait(
-            lambda: chain.snapshot().calibrated or "failed" in chain.snapshot().message,
+            lambda: snap().calibrated or "failed" in snap().message,
             30,
             "the automatic body calibration",
         )
-        assert chain.snapshot().calibrated, chain.snapshot().message
-        assert chain.snapshot().state == "disabled"
+        assert snap().calibrated, snap().message
+        assert snap().state == "disabled"
+        # the operator is still in the N-pose: wait for the hand at the working point
+        span = sim.cycle.spans[0]
+        _wait(lambda: sim.motion_time >= span.engage_t, 30, "the working point")
         _click(chromium, engage)
-        # the click travels browser -> websocket -> viewer -> session (pipeline thread)
+        # the click travels browser -> websocket -> viewer -> session (receiver thread)
         _wait(lambda: viewer.commands, 20, "the click to reach the viewer")
-        assert viewer.commands[0][0] == "engage"
+        assert viewer.commands[0] == ("engage", "engage: aligning")
+        assert sim.live is not None
+        transitions = sim.live.session.transitions
         _wait(
-            lambda: any(t.reason == "operator engaged" for t in chain.session.transitions),
+            lambda: any(t.reason == "operator engaged" for t in transitions),
             10,
             "the session to engage",
         )
-        assert chain.snapshot().state in ("aligning", "engaged")
+        _wait(lambda: snap().state == "engaged", 10, "the robot to be aligned")
         _click(chromium, _button(chromium, "Reindex"))
         _wait(lambda: len(viewer.commands) >= 2, 20, "the Reindex click")
         assert viewer.commands[1][0] == "reindex"
+        assert viewer.commands[1][1].startswith("reindex: ")  # the session answered
         # the robot has reported and the page has had time to draw the latest scene
-        _wait(lambda: chain.snapshot().robot_q is not None, 10, "a robot report")
+        _wait(lambda: snap().robot_q is not None, 10, "a robot report")
+        assert {s.name for s in snap().segments} == {"torso", "humerus_r", "radius_r"}
+        assert len(snap().sensors) == 3
         n = viewer.updates
         _wait(lambda: viewer.updates > n + 20, 20, "viewer updates")
         time.sleep(1.5)

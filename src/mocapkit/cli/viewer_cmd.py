@@ -25,9 +25,10 @@ def register(sub: Any) -> None:
     p = sub.add_parser(
         "viewer",
         help="live web viewer (viser) of a teleoperation session, with its controls",
-        description="Starts a teleoperation session from a simulated suit (the operator "
-        "traces the paper's shapes; real UDP, receiver, filters, body model, retargeting and "
-        "robot-server process) and serves the live 3-D viewer on HOST:PORT.",
+        description="Starts a live teleoperation session (mocapkit.teleop.live) fed by a "
+        "simulated suit (the operator traces the paper's shapes in a loop; a sender process, "
+        "real UDP, receiver, host-side filters, body model, retargeting and robot-server "
+        "process) and serves the live 3-D viewer on HOST:PORT.",
         epilog=_EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -47,29 +48,30 @@ def register(sub: Any) -> None:
 
 
 def _viewer(args: argparse.Namespace) -> int:
-    from mocapkit.demo.suit_chain import ChainConfig, SuitTeleopChain
+    from mocapkit.teleop.simulated import SimulatedConfig, SimulatedSession
+    from mocapkit.viz.live_api import LiveSnapshot
     from mocapkit.viz.viewer import TeleopViewer, import_viser
 
     import_viser()  # fail early, with the install hint, before starting anything
     shapes = tuple(s.strip() for s in args.shapes.split(",") if s.strip())
-    duration = 3600.0 if args.seconds is None else args.seconds + 5.0
-    cfg = ChainConfig(
+    cfg = SimulatedConfig(
         shapes=shapes,
-        duration_s=duration,
+        duration_s=None if args.seconds is None else args.seconds + 5.0,
         filter_name=args.filter,
         sensor_noise=not args.ideal_sensors,
         seed=args.seed,
     )
-    chain = SuitTeleopChain(cfg)
-    with chain, TeleopViewer(chain, host=args.host, port=args.port) as viewer:
+    sim = SimulatedSession(cfg)
+    with sim, TeleopViewer(sim, host=args.host, port=args.port) as viewer:
         print(f"mocapkit viewer: open {viewer.url} (Ctrl-C to stop)", file=sys.stderr)
         try:
             viewer.serve(args.seconds)
         finally:
-            snap = chain.snapshot()
+            snap = LiveSnapshot.from_mapping(sim.snapshot())
     summary = {
         "url": viewer.url,
         "seconds": round(snap.t_s, 3),
+        "filter": sim.filter_name,
         "state": snap.state,
         "safety": snap.safety,
         "packets": snap.packets,

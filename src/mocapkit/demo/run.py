@@ -21,7 +21,7 @@ class DemoConfig:
     """Attributes:
     out_dir: where the report and the outputs go.
     shape: the shape the simulated operator traces.
-    shape_s: its duration [s] (the teleoperation runs in real time: about shape_s + 6 s).
+    shape_s: its duration [s] (the teleoperation runs in real time: about shape_s + 7 s).
     sections: which sections to run (all by default).
     seed: sensor noise and mounting seed.
     """
@@ -77,10 +77,10 @@ def run_demo(config: DemoConfig | None = None, progress: Progress = no_progress)
     clock = time.perf_counter
     if "teleop" in c.sections:
         t0 = clock()
-        h = run_teleop(c.shape, c.shape_s, c.seed, progress)
-        result.summary["teleop"] = summary = teleop_summary(h, c.shape)
-        result.outputs.update(write_teleop_outputs(h, out))
-        report_teleop(report, h, summary)
+        r = run_teleop(c.shape, c.shape_s, c.seed, progress)
+        result.summary["teleop"] = summary = teleop_summary(r, c.shape)
+        result.outputs.update(write_teleop_outputs(r, out))
+        report_teleop(report, r, summary)
         result.seconds["teleop"] = clock() - t0
     if "markers" in c.sections:
         t0 = clock()

@@ -16,7 +16,12 @@ Noise-free signals are exact for the sampled motion (the property the tests chec
   disturbances active at ``t_k``.
 
 Errors, applied in a real sensor's order: scale error (per axis), bias (constant plus a
-random walk: bias drift), white noise, saturation (clip at the range). Sample-time jitter
+random walk: bias drift), white noise, saturation (clip at the range). White noise is given
+per sample (``noise``) or, as datasheets do, as a density (``noise_density`` [unit/sqrt(Hz)]):
+a sensor sampled at ``rate_hz`` whose output is band-limited to the Nyquist frequency has a
+per-sample standard deviation ``density * sqrt(rate_hz / 2)``, so the same sensor is noisier
+per sample at a higher rate while its angle random walk (``density`` per sqrt(s) after
+integration) does not depend on the rate. Sample-time jitter
 samples the motion at instants ``t_k + e_k`` (slerp / cubic spline), while the recorded
 time stamps stay nominal (the true instants are in ``meta["true_time"]``).
 """
@@ -34,6 +39,7 @@ from mocapkit.geometry import quat_conj, quat_log, quat_mul, quat_rotate_inv, qu
 from mocapkit.series import ImuRecording, PoseSeries
 
 STANDARD_GRAVITY = 9.80665
+_SQRT_50 = float(np.sqrt(50.0))  # the Nyquist bandwidth at 100 Hz: densities from 100 Hz figures
 
 
 @dataclass(frozen=True)
@@ -71,6 +77,8 @@ class SensorErrors:
 
     Attributes:
         noise: white-noise standard deviation per sample.
+        noise_density: white-noise density [unit/sqrt(Hz)] (per sample
+            ``noise_density * sqrt(rate_hz / 2)``; the two variances add).
         bias: constant bias (3,) or None to draw it from ``bias_std``.
         bias_std: standard deviation of the drawn constant bias.
         bias_drift: random-walk intensity of the bias [unit / sqrt(s)].
@@ -79,6 +87,7 @@ class SensorErrors:
     """
 
     noise: float = 0.0
+    noise_density: float = 0.0
     bias: tuple[float, float, float] | None = None
     bias_std: float = 0.0
     bias_drift: float = 0.0
@@ -86,7 +95,7 @@ class SensorErrors:
     range: float = np.inf
 
     def __post_init__(self) -> None:
-        for name in ("noise", "bias_std", "bias_drift", "scale_std"):
+        for name in ("noise", "noise_density", "bias_std", "bias_drift", "scale_std"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ConfigError(f"{name}: expected a finite value >= 0, got {v}")
@@ -97,6 +106,7 @@ class SensorErrors:
     def is_ideal(self) -> bool:
         return (
             self.noise == 0
+            and self.noise_density == 0
             and self.bias is None
             and self.bias_std == 0
             and self.bias_drift == 0
@@ -125,15 +135,58 @@ class ImuErrorModel:
 
     @classmethod
     def consumer_grade(cls) -> ImuErrorModel:
-        """Typical MEMS figures (BMI160/LSM9DS1 class), for demos and robustness tests."""
+        """Typical MEMS figures (BMI160/LSM9DS1 class), for demos and robustness tests.
+
+        White noise as densities, chosen so that at 100 Hz the per-sample noise is
+        0.005 rad/s (0.29 deg/s), 0.03 m/s^2 and 0.3 uT; bias drift (rate random walk)
+        2e-4 rad/s/sqrt(s); a turn-on gyroscope bias of 0.57 deg/s (1 sigma); a
+        magnetometer calibrated to 1 uT of hard iron and 1 % of soft iron.
+        """
         return cls(
             gyr=SensorErrors(
-                noise=0.005, bias_std=0.01, bias_drift=2e-4, scale_std=0.005, range=34.9
+                noise_density=0.005 / _SQRT_50,
+                bias_std=0.01,
+                bias_drift=2e-4,
+                scale_std=0.005,
+                range=34.9,
             ),
             acc=SensorErrors(
-                noise=0.03, bias_std=0.05, bias_drift=1e-3, scale_std=0.005, range=156.9
+                noise_density=0.03 / _SQRT_50,
+                bias_std=0.05,
+                bias_drift=1e-3,
+                scale_std=0.005,
+                range=156.9,
             ),
-            mag=SensorErrors(noise=0.3, bias_std=1.0, scale_std=0.01, range=4900.0),
+            mag=SensorErrors(
+                noise_density=0.3 / _SQRT_50, bias_std=1.0, scale_std=0.01, range=4900.0
+            ),
+            time_jitter_s=0.0,
+        )
+
+    @classmethod
+    def tactical_grade(cls) -> ImuErrorModel:
+        """A navigation-class MEMS IMU (ADIS1649x class): gyroscope 0.003 deg/s/sqrt(Hz),
+        turn-on bias 0.05 deg/s, rate random walk 2e-6 rad/s/sqrt(s); accelerometer
+        60 ug/sqrt(Hz), 1 mg bias; magnetometer 0.1 uT noise at 100 Hz, calibrated to
+        0.2 uT hard iron and 0.2 % soft iron."""
+        return cls(
+            gyr=SensorErrors(
+                noise_density=np.radians(0.003),
+                bias_std=np.radians(0.05),
+                bias_drift=2e-6,
+                scale_std=5e-4,
+                range=34.9,
+            ),
+            acc=SensorErrors(
+                noise_density=60e-6 * STANDARD_GRAVITY,
+                bias_std=1e-3 * STANDARD_GRAVITY,
+                bias_drift=1e-5,
+                scale_std=5e-4,
+                range=156.9,
+            ),
+            mag=SensorErrors(
+                noise_density=0.1 / _SQRT_50, bias_std=0.2, scale_std=0.002, range=4900.0
+            ),
             time_jitter_s=0.0,
         )
 
@@ -212,9 +265,20 @@ def _corrupt(
             steps = rng.normal(0.0, 1.0, x.shape) * err.bias_drift * np.sqrt(dt)[:, None]
             steps[0] = 0.0
             out += np.cumsum(steps, axis=0)
-        if err.noise:
-            out += rng.normal(0.0, err.noise, x.shape)
+        noise = _noise_std(err, dt)
+        if noise:
+            out += rng.normal(0.0, noise, x.shape)
     return np.clip(out, -err.range, err.range)
+
+
+def _noise_std(err: SensorErrors, dt: FloatArray) -> float:
+    """Per-sample white-noise standard deviation: ``noise`` and ``noise_density`` at the
+    recording's rate (from its median time step), variances added."""
+    if not err.noise_density:
+        return err.noise
+    steps = dt[1:]
+    rate_hz = 1.0 / float(np.median(steps)) if steps.size else 1.0
+    return float(np.hypot(err.noise, err.noise_density * np.sqrt(rate_hz / 2.0)))
 
 
 def simulate_imu(

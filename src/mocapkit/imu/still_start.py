@@ -7,9 +7,11 @@ power: the node averages the accelerometer and magnetometer for ``g_ref`` and ``
 rest is its bias: after ``still_s`` seconds of samples the bias is that mean, the wrapped
 filter's orientation is re-resolved from the window's mean directions
 (:meth:`OrientationFilter.reinitialize`), and from then on every gyroscope sample has the
-bias removed. Neither miller nor bachmann estimates a gyroscope bias: uncorrected, a
-consumer-grade bias of 0.01 rad/s turns into several degrees of slowly varying error
-(the filters' time constants are 6-9 s), which teleoperation sees as drift.
+bias removed; a filter that estimates the bias itself is told
+(:meth:`OrientationFilter.gyr_bias_removed`, with the window's standard error). Neither
+miller nor bachmann estimates a gyroscope bias: uncorrected, a consumer-grade bias of
+0.01 rad/s turns into several degrees of slowly varying error (the filters' time constants
+are 6-9 s), which teleoperation sees as drift.
 
 If the gyroscope moved during the window (its mean rate above ``max_motion_rad_s``, more
 than any plausible bias, or any sample that far from the mean), the window is not a
@@ -144,6 +146,10 @@ class StillStartFilter(OrientationFilter):
         else:
             self.bias = mean
             self.bias_ok = True
+            # a filter that estimates the bias itself must know its input moves by -mean
+            # (its estimate shifts; the window's spread is a measurement of what is left)
+            sigma = float(np.mean(np.std(gyr, axis=0))) / np.sqrt(len(gyr))
+            self.inner.gyr_bias_removed(mean, sigma if sigma > 0 else None)
             mag = np.array(self._mag) if self._mag else None
             if mag is not None and np.isnan(mag).all():
                 mag = None

@@ -45,6 +45,7 @@ from mocapkit._validate import FloatArray
 from mocapkit.body.calibration import HeadingFixed, calibrate_pose
 from mocapkit.body.sensor_tree import SensorTree
 from mocapkit.series import OrientationSeries
+from mocapkit.teleop.eval_trace import RunTrace, run_trace
 from mocapkit.teleop.live import LiveConfig, LiveSession
 from mocapkit.teleop.operator import OperatorMotion, operator_motion
 from mocapkit.teleop.operator_suit import Dropout, SuitSetup, suit_timeline
@@ -72,6 +73,8 @@ class EvalResult:
     achieved: FloatArray = field(repr=False, default_factory=lambda: np.zeros((0, 4)))
     truth: FloatArray = field(repr=False, default_factory=lambda: np.zeros((0, 4)))
     transitions: list[str] = field(default_factory=list)
+    trace: RunTrace | None = field(default=None, repr=False)
+    """The run's time series (``evaluate_shape(..., keep_trace=True)``)."""
 
     def summary(self) -> dict[str, Any]:
         """Exactly the six figures of ``mocapkit teleop evaluate --json``."""
@@ -142,12 +145,14 @@ def evaluate_shape(
     record: Path | None = None,
     live_hook: Any = None,
     size_m: float = 0.10,
+    keep_trace: bool = False,
 ) -> EvalResult:
     """Run one shape through the chain in real time (about ``shape_s`` + 7 s).
 
     ``size_m`` is the shape's size at the operator's hand [m]. ``live_hook(live, t_go,
     motion, server)``, if given, is called on the main thread right after the calibration
-    starts (fault scenarios: pause the server, inject samples...), and must return.
+    starts (fault scenarios: pause the server, inject samples...), and must return. With
+    ``keep_trace`` the result carries the run's time series (:class:`RunTrace`).
     """
     suit = suit or SuitSetup()
     pipe_cfg = pipeline or PipelineConfig()
@@ -159,12 +164,12 @@ def evaluate_shape(
     tree = SensorTree.preset(pipe_cfg.preset)
     heading = float(rng.uniform(-np.pi, np.pi))  # the operator faces anywhere (9D world)
     motion = operator_motion(
-        shape, tree, rate_hz=suit.rate_hz, shape_s=shape_s, heading_rad=heading
+        shape, tree, rate_hz=suit.rate_hz, shape_s=shape_s, size_m=size_m, heading_rad=heading
     )
     ids = {n: i + 1 for i, n in enumerate(tree.sensor_names)}
     if pipe_cfg.sensor_ids is not None:
         ids = dict(pipe_cfg.sensor_ids)
-    items, _poses = suit_timeline(motion, suit, ids, rng, dropouts)
+    items, poses = suit_timeline(motion, suit, ids, rng, dropouts)
     q_truth, T_truth, angles_truth = truth_model(motion, pipe_cfg)
     srv_cfg = server or ServerConfig(robot=pipe_cfg.robot)
     live_cfg = LiveConfig(pipeline=pipe_cfg, session=session or SessionConfig())
@@ -190,6 +195,8 @@ def evaluate_shape(
             f"{tr.source.value}->{tr.target.value}: {tr.reason}" for tr in live.session.transitions
         ]
         result = _figures(shape, motion, live, q_truth, T_truth, angles_truth, transitions)
+        if keep_trace:
+            result.trace = run_trace(motion, live, poses, T_truth, angles_truth)
     result.details.update(
         {
             "chain": suit.chain,

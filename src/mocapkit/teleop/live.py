@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from mocapkit.body.calibration import BodyCalibration, CalibrationError
+from mocapkit.body.segment_points import segment_points
 from mocapkit.errors import ConfigError, MocapkitError
 from mocapkit.suit.receiver import Receiver
 from mocapkit.suit.receiver_state import ReceiverConfig
@@ -89,6 +90,13 @@ def _pose_lists(T: Any) -> tuple[list[float], list[float]]:
     return [float(T[0, 3]), float(T[1, 3]), float(T[2, 3])], [float(v) for v in q]
 
 
+def _transitions(trs: list[Transition]) -> list[dict[str, Any]]:
+    return [
+        {"t": tr.t, "from": tr.source.value, "to": tr.target.value, "reason": tr.reason}
+        for tr in trs
+    ]
+
+
 def _pose_dict(T: Any) -> dict[str, list[float]] | None:
     if T is None:
         return None
@@ -131,6 +139,7 @@ class LiveSession:
         self._calibration_state = "none"
         self._recent_latency: deque[float] = deque(maxlen=1000)
         self._last_command: Any = None
+        self._message = ""
         self.sample_filter: Callable[[list[SuitSample]], list[SuitSample]] | None = None
         """Optional hook on each batch before the pipeline (fault injection in tests and
         the evaluation: e.g. NaN orientations)."""
@@ -203,42 +212,58 @@ class LiveSession:
         result: BodyCalibration = p.result
         return result
 
-    def engage(self) -> None:
-        """Start following the operator (reindexing first in relative mode)."""
-        self._submit("engage")
+    def _command(self, name: str, *args: Any) -> str:
+        p = self._submit(name, *args)
+        if p.error is not None:
+            raise MocapkitError(p.error)
+        result: str = p.result
+        return result
 
-    def disengage(self) -> None:
-        """Stop following: the robot holds."""
-        self._submit("disengage")
+    def engage(self) -> str:
+        """Start following the operator (reindexing first in relative mode); returns a
+        message (``engage: aligning``). Raises :class:`MocapkitError` before a calibration."""
+        return self._command("engage")
 
-    def reindex(self) -> None:
+    def disengage(self) -> str:
+        """Stop following: the robot holds; returns a message."""
+        return self._command("disengage")
+
+    def reindex(self) -> str:
         """Take a new offset between the operator and the robot (Fig. 10), any time."""
-        self._submit("reindex")
+        return self._command("reindex")
 
-    def clutch(self, pressed: bool) -> None:
+    def clutch(self, pressed: bool) -> str:
         """Pressed: the robot holds while the operator moves; released: reindex, follow."""
-        self._submit("clutch", bool(pressed))
+        return self._command("clutch", bool(pressed))
 
     def snapshot(self) -> dict[str, Any]:
         """The session's status (see the module docstring); plain JSON-ready values."""
         snap = dict(self._snap)
-        # these two change on operator commands: current values, not the last publication
+        # these change on operator commands: current values, not the last publication
         snap["state"] = self.session.state.value if self.receiver is not None else "stopped"
         snap["calibration"] = self._calibration_state
+        snap["calibrated"] = self.pipeline.body is not None
+        snap["message"] = self._message
+        snap["transitions"] = _transitions(self.session.transitions[-10:])
         if self.receiver is not None:
             st = self.receiver.stats()
             names = {v: k for k, v in self.pipeline.sensor_ids.items()}
-            snap["sensors"] = {
-                names.get(sid, str(sid)): {
+            quats = snap.pop("sensor_orientations", None) or {}
+            seg_of = {seg.sensor: seg.name for seg in self.pipeline.tree.segments}
+            sensors = {}
+            for sid, s in st.sensors.items():
+                name = names.get(sid, str(sid))
+                sensors[name] = {
                     "id": sid,
                     "state": s.state,
                     "rate_hz": s.rate_hz,
                     "delivered": s.delivered,
                     "lost": s.lost,
                     "loss": s.loss_ratio,
+                    "segment": seg_of.get(name),
+                    "quat": quats.get(name),
                 }
-                for sid, s in st.sensors.items()
-            }
+            snap["sensors"] = sensors
             total = sum(s.delivered + s.lost for s in st.sensors.values())
             snap["packet_loss"] = sum(s.lost for s in st.sensors.values()) / total if total else 0.0
             snap["dropped"] = dict(st.dropped)
@@ -251,14 +276,25 @@ class LiveSession:
         try:
             if p.name == "calibrate":
                 self._calibration_state = "collecting"
+                self._message = f"calibrate: hold the {self.config.pipeline.pose} pose"
 
                 def done(calib: BodyCalibration | None, error: str | None) -> None:
                     self._calibration_state = "done" if error is None else f"failed: {error}"
+                    self._message = (
+                        f"calibrate failed: {error}"
+                        if calib is None
+                        else f"calibrated (heading {math.degrees(calib.heading_rad):.1f} deg)"
+                    )
                     p.finish(calib, error)
 
                 self.pipeline.start_calibration(now, p.args[0], done)
                 return  # finished when the window is full
             if p.name == "engage":
+                if self.pipeline.body is None:
+                    raise ConfigError(
+                        "engage: calibrate first (the operator holds the "
+                        f"{self.config.pipeline.pose} pose, then calibrate)"
+                    )
                 s.engage(now)
             elif p.name == "disengage":
                 s.disable(now)
@@ -268,8 +304,10 @@ class LiveSession:
                 s.clutch(p.args[0], now)
             else:  # pragma: no cover (the API only queues known names)
                 raise ConfigError(f"unknown command {p.name!r}")
-            p.finish()
+            self._message = f"{p.name}: {s.state.value}"
+            p.finish(self._message)
         except MocapkitError as exc:
+            self._message = f"{p.name} failed: {exc}"
             p.finish(error=str(exc))
 
     def _on_batch(self, samples: list[SuitSample], now_ns: int) -> None:
@@ -325,10 +363,7 @@ class LiveSession:
             "state": self.session.state.value,
             "calibration": self._calibration_state,
             "fault": p.last_fault,
-            "transitions": [
-                {"t": tr.t, "from": tr.source.value, "to": tr.target.value, "reason": tr.reason}
-                for tr in trs
-            ],
+            "transitions": _transitions(trs),
             "latency_ms": {
                 "p50": float(np.percentile(lat, 50)) if lat.size else None,
                 "p99": float(np.percentile(lat, 99)) if lat.size else None,
@@ -352,4 +387,25 @@ class LiveSession:
             else {n: float(np.degrees(v)) for n, v in zip(p.arm.joint_names, q_robot, strict=True)},
             "ee_commanded": _pose_dict(self._last_command),
             "ee_actual": _pose_dict(self.link.robot_pose()),
+            "robot_name": self.config.pipeline.robot,
+            "segments": self._segments(),
+            "sensor_orientations": {
+                name: [float(v) for v in q] if np.isfinite(q).all() else None
+                for name, q in zip(p.tree.sensor_names, p.q_sensor, strict=True)
+            },
         }
+
+    def _segments(self) -> list[dict[str, Any]]:
+        """The body model's segments for drawing: joint and end points [m] and
+        ``q_world_segment`` (the ground origin at the world origin); lost ones left out."""
+        p = self.pipeline
+        if p.body is None or p.calibration is None:
+            return []
+        q = p.body.q_world_segment
+        start, end = segment_points(p.tree, q, p.calibration.q_world_ground)
+        return [
+            {"name": name, "start": start[i].tolist(), "end": end[i].tolist(),
+             "quat": q[i].tolist()}
+            for i, name in enumerate(p.tree.segment_names)
+            if np.isfinite(start[i]).all() and np.isfinite(end[i]).all()
+        ]  # fmt: skip

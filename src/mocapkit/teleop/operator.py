@@ -38,6 +38,7 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.body.calibration import POSES_DEG, q_world_ground
 from mocapkit.body.joint_angles import compose_pose
+from mocapkit.body.segment_points import segment_points
 from mocapkit.body.sensor_tree import SensorTree
 from mocapkit.errors import ConfigError
 from mocapkit.geometry import quat_mul, quat_rotate
@@ -130,23 +131,6 @@ def _smooth(u: FloatArray) -> FloatArray:
     return u**3 * (10 - 15 * u + 6 * u**2)
 
 
-def segment_positions(
-    tree: SensorTree, q_world_segment: FloatArray, q_wg: FloatArray
-) -> FloatArray:
-    """Segment origins (..., S, 3) [m] from orientations (..., S, 4): a root's origin is
-    its offset in the ground frame, a child's is its parent's plus the offset turned by
-    the parent's orientation."""
-    p = np.zeros((*q_world_segment.shape[:-1], 3))
-    parents = tree.parent_index
-    for i, seg in enumerate(tree.segments):
-        if parents[i] < 0:
-            p[..., i, :] = quat_rotate(q_wg, seg.offset)
-        else:
-            j = int(parents[i])
-            p[..., i, :] = p[..., j, :] + quat_rotate(q_world_segment[..., j, :], seg.offset)
-    return p
-
-
 class _ArmKinematics:
     """Segment orientations, origins and the hand point for given coordinates."""
 
@@ -169,7 +153,7 @@ class _ArmKinematics:
 
     def hand(self, coords: dict[str, FloatArray]) -> tuple[FloatArray, FloatArray, FloatArray]:
         q = self.orientations(coords)
-        p = segment_positions(self.tree, q, self.q_wg)
+        p, _ = segment_points(self.tree, q, self.q_wg)
         hand = p[..., self.fore, :] + quat_rotate(q[..., self.fore, :], HAND_IN_FOREARM)
         return hand, q, p
 
@@ -233,19 +217,50 @@ def operator_motion(
             cur = _ik(kin, prev, centre + R_world_body @ disp[k])
             prev = cur
         values[k] = [cur[c] for c in names]
+    return motion_from_coordinates(
+        tree,
+        t,
+        values,
+        heading_rad,
+        calib_window=(max(0.0, calib_s - 1.0), calib_s - 0.2),
+        engage_t=t_shape - 0.5 * settle_s,
+        shape_span=(t_shape, t_shape + shape_s),
+    )
+
+
+def npose_coordinates(tree: SensorTree) -> FloatArray:
+    """The calibration pose (N-pose) as the tree's coordinates (K,) [rad]."""
+    base = {k: np.deg2rad(v) for k, v in POSES_DEG["npose"].items()}
+    return np.array([base.get(c, 0.0) for c in tree.coordinate_names])
+
+
+def motion_from_coordinates(
+    tree: SensorTree,
+    time: FloatArray,
+    values: FloatArray,
+    heading_rad: float,
+    calib_window: tuple[float, float],
+    engage_t: float,
+    shape_span: tuple[float, float],
+) -> OperatorMotion:
+    """The operator's truth from its coordinates (N, K) [rad] (the tree's, in order) at
+    ``time`` (N,) [s]: segment orientations and origins, the hand point, by the body
+    model's own forward kinematics."""
+    kin = _ArmKinematics(tree, heading_rad)
+    names = tree.coordinate_names
     coords = {c: values[:, j] for j, c in enumerate(names)}
     hand, q, p = kin.hand(coords)
-    series = JointAngleSeries(t, names, values, name="operator")
+    series = JointAngleSeries(time, names, values, name="operator")
     return OperatorMotion(
-        t,
+        time,
         tree,
         series,
         q,
         p,
         hand,
         heading_rad,
-        (max(0.0, calib_s - 1.0), calib_s - 0.2),
-        t_shape - 0.5 * settle_s,
-        t_shape,
-        t_shape + shape_s,
+        calib_window,
+        engage_t,
+        shape_span[0],
+        shape_span[1],
     )

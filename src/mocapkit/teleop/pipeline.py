@@ -4,9 +4,11 @@
 in one drained batch (a hub bundle, or the RAW datagrams of a round) and runs, on the
 caller's thread (the receiver's, see :class:`mocapkit.teleop.live.LiveSession`):
 
-1. per sample: host-side fusion for RAW samples (one :class:`StillStartFilter` around a
-   registry filter per sensor: ``--fusion host``), or the node's own orientation
-   (``--fusion node``, the paper's design); the quaternion is checked (finite, unit);
+1. per sample: host-side fusion for RAW samples (``--fusion host``: a
+   :class:`~mocapkit.imu.filter_bank.FilterBank`, i.e. a still start around a registry
+   filter per sensor, the batch's samples advanced in one numba call), or the node's own
+   orientation (``--fusion node``, the paper's design); the quaternion is checked (finite,
+   unit);
 2. the sensor watchdog: every sensor of the tree must have brought a valid sample within
    ``stale_after_s``, else the session holds and says which sensor and why;
 3. the body model (:class:`mocapkit.body.kinematics.BodyStream`, calibrated from a held
@@ -46,36 +48,26 @@ from mocapkit.body.calibration import (
     HeadingFixed,
     HeadingFromSensor,
     calibrate_pose,
-    pose_coordinates,
 )
-from mocapkit.body.joint_angles import compose_pose
 from mocapkit.body.kinematics import BodyStream
 from mocapkit.body.sensor_tree import SensorTree
 from mocapkit.errors import ConfigError, MocapkitError
 from mocapkit.geometry import quat_to_matrix
+from mocapkit.imu.filter_bank import FilterBank
 from mocapkit.imu.filters import make_filter
-from mocapkit.imu.still_start import StillStartFilter
 from mocapkit.robot.registry import robot_arm
-from mocapkit.robot.retarget_map import packaged_map
-from mocapkit.robot.segment_retarget import (
-    SegmentRetargeter,
-    robonaut2_groups,
-    robonaut2_init_posture,
-)
 from mocapkit.series import OrientationSeries
 from mocapkit.suit.protocol import Kind
 from mocapkit.teleop import _kernels
 from mocapkit.teleop.heading import HingeHeading
 from mocapkit.teleop.link import RobotLink
+from mocapkit.teleop.retarget_setup import CHEST_IN_SEGMENT, setup_retarget
 from mocapkit.teleop.session import State, TeleopSession, TickOutput
 
 log = logging.getLogger("mocapkit.teleop.pipeline")
 
-#: chest coordinates (x forward, y left, z up) -> OpenSim segment coordinates (x anterior,
-#: y up, z right): ``R_world_chest = R_world_segment @ CHEST_IN_SEGMENT``.
-CHEST_IN_SEGMENT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
-CHEST_SEGMENT = "torso"
 _LATENCY_CAPACITY = 1 << 17
+_NO_MAG = np.full(3, np.nan)  # a RAW sample without a magnetometer: a gap
 
 
 @dataclass(frozen=True)
@@ -143,6 +135,9 @@ class Frame:
         angles: the human joint angles (K,) [rad] or None.
         latency_ns: arrival of the oldest contributing sample -> command sent, or None.
         notes: limit notes and faults.
+        q_sensor, t_sample: with ``keep_frames``: (S, 4) each sensor's latest orientation
+            and (S,) its sample's sensor time [s] (tree order), else None.
+        q_segment: with ``keep_frames``: (S, 4) the body model's ``q_world_segment``.
     """
 
     t: float
@@ -154,6 +149,9 @@ class Frame:
     angles: FloatArray | None
     latency_ns: int | None
     notes: list[str] = field(default_factory=list)
+    q_sensor: FloatArray | None = None
+    t_sample: FloatArray | None = None
+    q_segment: FloatArray | None = None
 
 
 @dataclass
@@ -201,14 +199,21 @@ class TeleopPipeline:
         self.q_sensor = np.full((n_s, 4), np.nan)
         """(S, 4) latest valid ``q_world_sensor`` per sensor (tree order)."""
         self.t_valid = np.full(n_s, -np.inf)
+        self.t_sample = np.full(n_s, np.nan)
+        """(S,) sensor time of each sensor's latest valid sample [s]."""
         self.bad: dict[int, str] = {}
-        self.fusion: dict[int, StillStartFilter] = {}
         make_filter(c.filter_name, c.rate_hz)  # fail early on a bad name
-        self.arm = robot_arm(c.robot)
-        self._chest_index = (
-            tree.segment_names.index(CHEST_SEGMENT) if CHEST_SEGMENT in tree.segment_names else -1
+        self.fusion: FilterBank | None = (
+            FilterBank(c.filter_name, c.rate_hz, n_s, c.still_start_s, c.use_mag, self._label)
+            if c.fusion == "host"
+            else None
         )
-        self._setup_retarget()
+        self.arm = robot_arm(c.robot)
+        rs = setup_retarget(tree, self.arm, c.robot, c.retarget, c.pose)
+        self.retargeter = rs.retargeter
+        self.compiled_map = rs.compiled_map
+        self._rt_segments, self._rt_index = rs.segments, rs.index
+        self._chest_index, self._map_extra = rs.chest_index, rs.map_extra
         self.body: BodyStream | None = None
         self.calibration: BodyCalibration | None = None
         self._calib: _Calibration | None = None
@@ -233,60 +238,8 @@ class TeleopPipeline:
         if self.retargeter is not None:  # compile/load its kernel now
             self.retargeter.solve(np.tile(np.eye(3), (len(self._rt_segments), 1, 1)))
             self.retargeter.reset()
-        if c.fusion == "host":
+        if self.fusion is not None and not self.fusion.batched:  # compile the filter's kernel
             make_filter(c.filter_name, c.rate_hz).update([0.0, 0.0, 0.0], [0.0, 0.0, 9.81])
-
-    # -- setup ------------------------------------------------------------------------------
-    def _setup_retarget(self) -> None:
-        c, tree, arm = self.config, self.tree, self.arm
-        self._map_extra: list[str] = []
-        if c.retarget == "segments":
-            side = {"robonaut2-right": "right", "robonaut2-left": "left"}.get(c.robot)
-            if side is None:
-                raise ConfigError(
-                    f"retarget 'segments' (eq. 16 along the robot's own axes) is set up for "
-                    f"Robonaut 2; for {c.robot!r} use retarget='map' (its YAML joint map)"
-                )
-            groups = [g for g in robonaut2_groups(side) if g.segment in tree.segment_names]
-            if not groups or groups[0].segment != f"humerus_{side[0]}":
-                raise ConfigError(
-                    f"tree {tree.name!r} has no humerus_{side[0]} segment for the {side} arm"
-                )
-            groups = [g for g in groups if g.parent is None or g.parent in tree.segment_names]
-            self.retargeter: SegmentRetargeter | None = SegmentRetargeter(
-                arm, groups, robonaut2_init_posture(side)
-            )
-            self._rt_segments = self.retargeter.segments
-            self._rt_index = np.array(
-                [tree.segment_names.index(s) for s in self._rt_segments], dtype=np.int64
-            )
-            # the segments in the chest frame at the calibration pose: what the suit's
-            # initialisation posture means for the robot (q_init)
-            q_g = compose_pose(tree, pose_coordinates(tree, c.pose))
-            R_g = quat_to_matrix(q_g)
-            R_chest_g = (
-                np.eye(3) if self._chest_index < 0 else R_g[self._chest_index].T
-            )  # ground -> chest segment at the pose
-            self.retargeter.calibrate(
-                {
-                    s: CHEST_IN_SEGMENT.T @ R_chest_g @ R_g[i]
-                    for s, i in zip(self._rt_segments, self._rt_index, strict=True)
-                }
-            )
-            self.compiled_map = None
-        else:
-            self.retargeter = None
-            self._rt_segments = ()
-            self._rt_index = np.zeros(0, dtype=np.int64)
-            rmap = packaged_map(c.robot)
-            self._map_extra = [h for h in rmap.human_names if h not in tree.coordinate_names]
-            self.compiled_map = rmap.compile(arm, [*tree.coordinate_names, *self._map_extra])
-            if self._map_extra:
-                log.info(
-                    "map: %s not measured by tree %s, held at 0 (neutral)",
-                    ", ".join(self._map_extra),
-                    tree.name,
-                )
 
     # -- calibration ------------------------------------------------------------------------
     def start_calibration(
@@ -382,34 +335,48 @@ class TeleopPipeline:
         log.info("calibrated: heading %.1f deg", math.degrees(calib.heading_rad))
 
     # -- per batch ------------------------------------------------------------------------------
-    def _sample_quat(self, slot: int, s: Any) -> Any:
-        if s.kind is Kind.RAW:
-            if self.config.fusion != "host" or s.gyr is None or s.acc is None:
-                return None
-            f = self.fusion.get(slot)
-            if f is None:
-                c = self.config
-                inner = make_filter(c.filter_name, c.rate_hz)
-                f = self.fusion[slot] = StillStartFilter(
-                    inner, c.still_start_s, label=self._label[slot]
-                )
-            mag = s.mag if self.config.use_mag else None
-            return f.update(s.gyr, s.acc, mag)
-        return s.quat
+    def _fuse(self, samples: Sequence[Any]) -> dict[int, Any]:
+        """Host-side fusion of the batch's RAW samples, all sensors in one bank call:
+        sample index -> ``q_world_sensor`` (4,), or the reason it failed (str)."""
+        assert self.fusion is not None
+        idx, slots, gyr, acc, mag = [], [], [], [], []
+        use_mag = self.config.use_mag
+        for i, s in enumerate(samples):
+            if s.kind is not Kind.RAW or s.gyr is None or s.acc is None:
+                continue
+            slot = self._slot_of_id.get(s.sensor_id)
+            if slot is None:
+                continue
+            idx.append(i)
+            slots.append(slot)
+            gyr.append(s.gyr)
+            acc.append(s.acc)
+            mag.append(s.mag if use_mag and s.mag is not None else _NO_MAG)
+        if not idx:
+            return {}
+        m = np.array(mag) if use_mag else None
+        q, errors = self.fusion.update(slots, np.array(gyr), np.array(acc), m)
+        out: dict[int, Any] = {i: q[k] for k, i in enumerate(idx)}
+        for k, why in errors.items():
+            out[idx[k]] = why
+        return out
 
     def ingest(self, samples: Sequence[Any], now: float) -> int | None:
         """Take a batch's samples in; returns the oldest contributing arrival [ns] or None."""
         oldest: int | None = None
         cal = self._calib
-        for s in samples:
+        fused = self._fuse(samples) if self.fusion is not None else None
+        for i, s in enumerate(samples):
             slot = self._slot_of_id.get(s.sensor_id)
             if slot is None:
                 continue
-            try:
-                q = self._sample_quat(slot, s)
-            except MocapkitError as exc:
-                self.bad[slot] = f"{self._label[slot]}: host fusion failed ({exc})"
-                continue
+            if s.kind is Kind.RAW:
+                q = None if fused is None else fused.get(i)
+                if isinstance(q, str):
+                    self.bad[slot] = f"{self._label[slot]}: host fusion failed ({q})"
+                    continue
+            else:
+                q = s.quat
             if q is None:
                 continue
             w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
@@ -424,6 +391,7 @@ class TeleopPipeline:
             qs = self.q_sensor[slot]
             qs[0], qs[1], qs[2], qs[3] = w, x, y, z
             self.t_valid[slot] = now
+            self.t_sample[slot] = s.t_sensor_s
             if not s.t_sensor_s <= self._t_sensor:
                 self._t_sensor = s.t_sensor_s
             if oldest is None or s.t_arrival_ns < oldest:
@@ -555,6 +523,10 @@ class TeleopPipeline:
             out.notes,
         )
         if self.keep_frames:
+            frame.q_sensor = self.q_sensor.copy()
+            frame.t_sample = self.t_sample.copy()
+            if self.body is not None:
+                frame.q_segment = self.body.q_world_segment.copy()
             self.frames.append(frame)
         if self.on_frame is not None:
             self.on_frame(frame)

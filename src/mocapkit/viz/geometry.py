@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 
 from mocapkit._validate import FloatArray
+from mocapkit.body.segment_points import segment_points
 from mocapkit.body.sensor_tree import SensorTree
-from mocapkit.geometry import quat_rotate
 from mocapkit.robot.model import ArmModel
 from mocapkit.viz.live_api import SegmentPose
 
@@ -23,12 +23,9 @@ def skeleton_segments(
     q_world_ground: Any,
     root_position: Any = (0.0, 0.0, 0.0),
 ) -> tuple[SegmentPose, ...]:
-    """Segment start and end points from orientations and the tree's offsets.
-
-    A root's joint sits at ``root_position + R_world_ground @ offset`` (the ground frame is
-    OpenSim's y-up ground turned into the z-up world); a child's at
-    ``start_parent + R_world_parent @ offset``; a segment ends at ``start + R_world_seg @
-    end``. Segments with a NaN orientation (a lost sensor) and their children are left out.
+    """Segment start and end points from orientations and the tree's offsets
+    (:func:`mocapkit.body.segment_points.segment_points`). Segments with a NaN orientation
+    (a lost sensor) and their children are left out.
 
     Args:
         tree: the sensor tree (``offset`` and ``end`` [m] per segment).
@@ -37,24 +34,12 @@ def skeleton_segments(
         root_position: (3,) [m] where the ground origin is drawn.
     """
     q = np.asarray(q_world_segment, dtype=float)
-    qg = np.asarray(q_world_ground, dtype=float)
-    origin = np.asarray(root_position, dtype=float)
-    starts: dict[str, FloatArray] = {}
-    out = []
-    for i, seg in enumerate(tree.segments):
-        if not np.isfinite(q[i]).all():
-            continue
-        if seg.parent == "ground":
-            start = origin + quat_rotate(qg, seg.offset)
-        elif seg.parent in starts:
-            parent_i = tree.segment_names.index(seg.parent)
-            start = starts[seg.parent] + quat_rotate(q[parent_i], seg.offset)
-        else:
-            continue
-        starts[seg.name] = start
-        end = start + quat_rotate(q[i], seg.end)
-        out.append(SegmentPose(seg.name, start, end, q[i].copy()))
-    return tuple(out)
+    start, end = segment_points(tree, q, q_world_ground, root_position)
+    return tuple(
+        SegmentPose(seg.name, start[i], end[i], q[i].copy())
+        for i, seg in enumerate(tree.segments)
+        if np.isfinite(start[i]).all() and np.isfinite(end[i]).all()
+    )
 
 
 def arm_frames(arm: ArmModel) -> tuple[str, ...]:

@@ -107,7 +107,9 @@ class LiveSnapshot:
         ``latency_ms`` ``{p50, p99}``, ``packet_loss``, ``sensors`` ``{name: {delivered}}``,
         ``robot_joints_deg`` ``{joint: deg}`` (in the arm's order), ``ee_commanded`` /
         ``ee_actual`` ``{pos, quat}``, ``transitions`` (str or ``{from, to, reason}``),
-        optional ``segments`` ``[{name, start, end, quat}]`` and ``message``."""
+        optional ``segments`` ``[{name, start, end, quat}]``, ``calibrated``, ``message``,
+        ``robot_name``; a sensor with ``quat`` and ``segment`` (a drawn one) is drawn at the
+        middle of its segment."""
         from mocapkit.robot.model import pose_matrix
 
         safety = d.get("safety", "")
@@ -137,6 +139,12 @@ class LiveSnapshot:
             for s in d.get("segments", ())
         )  # fmt: skip
         sensors = d.get("sensors") or {}
+        middle = {s.name: 0.5 * (s.start + s.end) for s in segments}
+        sensor_poses = tuple(
+            SensorPose(name, middle[v["segment"]], np.asarray(v["quat"], float))
+            for name, v in sensors.items()
+            if v.get("quat") is not None and v.get("segment") in middle
+        )
         calib = d.get("calibration")
         return LiveSnapshot(
             t_s=float(d.get("t", 0.0)),
@@ -148,6 +156,7 @@ class LiveSnapshot:
             packet_loss=float(d.get("packet_loss", 0.0) or 0.0),
             packets=int(sum(int(v.get("delivered", 0)) for v in sensors.values())),
             segments=segments,
+            sensors=sensor_poses,
             robot_name=str(d.get("robot_name", robot_name)),
             robot_q=None if joints is None else np.radians(np.array(list(joints.values()))),
             ee_command=pose(d.get("ee_commanded")),

@@ -17,7 +17,9 @@ viser is the ``viz`` extra and is imported only here, when a viewer is made.
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -70,7 +72,10 @@ class TeleopViewer:
     ) -> None:
         viser = import_viser()
         self.session = session
-        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        # viser prints its address banner on stdout whatever ``verbose`` says: keep stdout
+        # for the command's own output (``--json``)
+        with contextlib.redirect_stdout(sys.stderr):
+            self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.url = f"http://{host}:{self.server.get_port()}/"
         self.robot_origin = np.asarray(robot_origin, dtype=float)
         self.update_hz = update_hz
@@ -256,7 +261,8 @@ class TeleopViewer:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(5.0)
-        self.server.stop()
+        with contextlib.redirect_stdout(sys.stderr):  # ("Server stopped", on stdout)
+            self.server.stop()
 
     def __enter__(self) -> TeleopViewer:
         return self

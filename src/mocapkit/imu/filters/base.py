@@ -124,6 +124,22 @@ class FilterParams:
         return max(1, round(self.init_window_s * self.rate_hz))
 
 
+@dataclass(frozen=True)
+class GainParams(FilterParams):
+    """Parameters of a filter with one correction gain ``alpha`` [1/s] (time constant
+    ``1/alpha``), applied once per sample as ``alpha dt``; ``0 <= alpha dt < 1``."""
+
+    alpha: float = 0.1
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not (np.isfinite(self.alpha) and 0.0 <= self.alpha * self.dt < 1.0):
+            raise ConfigError(
+                f"alpha: expected 0 <= alpha < rate_hz ({self.rate_hz:g}) in 1/s, got "
+                f"{self.alpha}; larger gains overshoot every step"
+            )
+
+
 @dataclass
 class FilterState:
     """What a filter carries from one sample to the next. Subclasses add fields.
@@ -215,6 +231,13 @@ class OrientationFilter(ABC):
         self.state.initialised = True
         self._after_reinitialize()
         return self.quat
+
+    def gyr_bias_removed(self, bias: Any, sigma: float | None = None) -> None:  # noqa: B027
+        """Tell the filter that the caller subtracts ``bias`` [rad/s] (3,) from every later
+        gyroscope reading (a bias measured at rest, e.g. in a calibration pose), with
+        uncertainty ``sigma`` [rad/s] if known. A filter that estimates the bias shifts its
+        estimate by ``-bias`` (and may take ``sigma`` as a measurement of what is left);
+        the others have nothing to do (this default)."""
 
     def _after_reinitialize(self) -> None:  # noqa: B027  (an optional hook)
         """Hook for subclasses that keep more state tied to the orientation."""

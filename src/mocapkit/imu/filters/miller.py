@@ -92,8 +92,8 @@ from mocapkit.geometry import quat_mul, quat_rotate_inv
 from mocapkit.imu.filters.base import (
     Backend,
     FilterInputs,
-    FilterParams,
     FilterState,
+    GainParams,
     OrientationFilter,
     register_filter,
 )
@@ -106,19 +106,11 @@ _MIN_PROJECTION = 1e-9
 
 
 @dataclass(frozen=True)
-class MillerParams(FilterParams):
+class MillerParams(GainParams):
     """``alpha``: correction gain [1/s] of eq. 13 (time constant ``1/alpha``);
     ``0 <= alpha dt < 1``."""
 
     alpha: float = DEFAULT_ALPHA
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if not (np.isfinite(self.alpha) and 0.0 <= self.alpha * self.dt < 1.0):
-            raise ConfigError(
-                f"alpha: expected 0 <= alpha < rate_hz ({self.rate_hz:g}) in 1/s, got "
-                f"{self.alpha}; larger gains overshoot every step"
-            )
 
 
 @dataclass

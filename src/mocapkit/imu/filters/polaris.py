@@ -37,12 +37,13 @@ from typing import Any
 
 import numpy as np
 
-from mocapkit._validate import FloatArray
+from mocapkit._validate import FloatArray, as_float_array, check_shape
 from mocapkit.errors import ConfigError, DataError
+from mocapkit.geometry import quat_mul, quat_normalize
 from mocapkit.imu.filters import polaris_params as pp
 from mocapkit.imu.filters.base import Backend, FilterState, OrientationFilter, register_filter
 from mocapkit.imu.filters.inputs import FilterInputs
-from mocapkit.imu.filters.polaris_engine import run_pass, start
+from mocapkit.imu.filters.polaris_engine import initial_linear_acc, run_pass, start
 from mocapkit.imu.filters.polaris_offline import OfflineResult, smooth
 from mocapkit.imu.filters.polaris_params import PolarisCore, PolarisParams
 from mocapkit.imu.filters.polaris_reference import reset_heading
@@ -142,6 +143,44 @@ class Polaris(OrientationFilter):
         """Re-initialise the heading from the next magnetometer sample (keeps the rest)."""
         reset_heading(self.state.core)
 
+    def gyr_bias_removed(self, bias: Any, sigma: float | None = None) -> None:
+        """The caller now subtracts ``bias`` [rad/s] (3,) from every gyroscope reading: the
+        bias estimate and the rest detector's memory of the readings move by ``-bias`` (so
+        nothing sees a step; only whether the rate is small enough for rest may differ);
+        with ``sigma`` [rad/s], the caller's measurement leaves ``0 +- sigma`` of bias, which
+        is fused with the estimate by one Kalman update of the bias states (P9's form)."""
+        b = as_float_array(bias, "bias")
+        check_shape(b, "bias", 3)
+        core = self.state.core
+        core.bias = core.bias - b
+        # the rest detector's memory of the readings moves with them
+        core.rest_gyr_lp = core.rest_gyr_lp - b
+        core.rest_gyr_sum = core.rest_gyr_sum - b * core.rest_count[0]
+        # (P8) the lag model's record of the corrections applied, G = int R6[:2] b dt, as if
+        # the new estimate had always been used (the low-pass is linear: shift its memory)
+        J = core.drift_J.reshape(2, 3)
+        core.drift_G = core.drift_G - J @ b
+        core.drift_G_lp = core.drift_G_lp - core.drift_J_lp.reshape(2, 3) @ b
+        j_state = core.drift_J_lp_state.reshape(2, 3, 2)
+        core.drift_G_lp_state = (
+            core.drift_G_lp_state.reshape(2, 2) - np.einsum("rjm,j->rm", j_state, b)
+        ).reshape(-1)
+        if sigma is None or not self.state.started:
+            return
+        if not (np.isfinite(sigma) and sigma > 0.0):
+            raise ConfigError(f"sigma: expected a positive bias uncertainty in rad/s, got {sigma}")
+        P = core.tilt_P.reshape(5, 5).copy()
+        x = np.zeros(5)
+        for i in range(3):
+            s = P[2 + i, 2 + i] + sigma * sigma
+            k = P[:, 2 + i] / s
+            x = x + k * (0.0 - (core.bias[i] + x[2 + i]))
+            P = P - np.outer(k, k) * s
+        core.bias = core.bias + x[2:5]
+        q_fix = np.array([1.0, 0.5 * x[0], 0.5 * x[1], 0.0])
+        core.q_acc = quat_normalize(quat_mul(q_fix, core.q_acc))
+        core.tilt_P = (0.5 * (P + P.T)).reshape(-1)
+
     def _after_reinitialize(self) -> None:
         """A new ``state.quat``: restart the inclination and heading filters from it (the
         low-passes from the rest detector's memory of the readings), keep the gyroscope
@@ -174,7 +213,14 @@ class Polaris(OrientationFilter):
         if not self.state.started:
             usable = np.flatnonzero(inputs.use_acc)
             acc0 = inputs.acc[usable[0]] if usable.size else np.array([0.0, 0.0, GRAVITY])
-            start(self._c, core, self.state.quat, inputs.gyr[0], acc0)
+            # the linear acceleration at the start, from the first sample only (so that a run
+            # split anywhere, or sample by sample, starts the same), weighted as the
+            # initialisation window the start was taken from
+            first = usable[0] if usable.size else 0
+            lin2 = initial_linear_acc(acc0[None, :], inputs.gyr[first : first + 1], self.params.dt)
+            start(
+                self._c, core, self.state.quat, inputs.gyr[0], acc0, lin2, self.params.init_samples
+            )
         result = run_pass(
             self._c,
             core,

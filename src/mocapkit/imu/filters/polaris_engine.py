@@ -13,6 +13,7 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.errors import DataError
 from mocapkit.geometry import quat_from_two_vectors
+from mocapkit.imu.filters import polaris_params as pp
 from mocapkit.imu.filters.polaris_kernels import polaris_kernel
 from mocapkit.imu.filters.polaris_offline_kernels import heading_kernel, strapdown_kernel
 from mocapkit.imu.filters.polaris_params import PolarisCore, pack_state, unpack_state
@@ -51,11 +52,41 @@ def initial_tilt(acc: FloatArray, use_acc: np.ndarray) -> FloatArray:
     return q
 
 
+#: [m] how far a body-worn sensor sits from the joint it turns about (a forearm's length):
+#: a sensor turning at ``w`` feels about ``LEVER_ARM * (w^2 + dw/dt)`` of linear acceleration.
+LEVER_ARM = 0.3
+
+
+def initial_linear_acc(acc_window: FloatArray, gyr_window: FloatArray, dt: float) -> float:
+    """Mean square linear acceleration [(m/s^2)^2] per axis in the (K, 3) accelerometer
+    samples [m/s^2] a start is taken from (gyroscope [rad/s] over the same samples, ``dt``
+    [s] apart): 0 for a sensor at rest.
+
+    Along gravity it shows as ``|acc|`` off ``g`` (mean offset and spread); sideways it
+    does not, so the rotation bounds it too: a sensor ``LEVER_ARM`` from the joint it turns
+    about feels ``LEVER_ARM (w^2 + dw/dt)``.
+    """
+    norms = np.linalg.norm(acc_window, axis=1)
+    if norms.size == 0:
+        return 0.0
+    lin2 = (float(np.mean(norms)) - pp.GRAVITY) ** 2 + float(np.var(norms))
+    turn = float(np.max(np.linalg.norm(gyr_window, axis=1))) ** 2
+    if len(gyr_window) > 1:
+        turn += float(np.linalg.norm(gyr_window[-1] - gyr_window[0])) / ((len(gyr_window) - 1) * dt)
+    return lin2 + (LEVER_ARM * turn) ** 2
+
+
 def start(
-    c: FloatArray, core: PolarisCore, q_init: FloatArray, gyr0: FloatArray, acc0: FloatArray
+    c: FloatArray,
+    core: PolarisCore,
+    q_init: FloatArray,
+    gyr0: FloatArray,
+    acc0: FloatArray,
+    lin2: float = 0.0,
+    n_window: int = 1,
 ) -> None:
     """Start ``core`` (same for both backends: the start is plain numpy)."""
-    start_core(c, core, q_init, gyr0, acc0)
+    start_core(c, core, q_init, gyr0, acc0, lin2, n_window)
 
 
 def run_pass(

@@ -13,27 +13,23 @@ import math
 import numpy as np
 from numba import njit
 
+from mocapkit.imu.filters.polaris_heading_kernels import heading_update, start_heading
 from mocapkit.imu.filters.polaris_params import (
     C_A1,
     C_A2,
+    C_AC_ALPHA,
+    C_AC_GAIN,
     C_B0,
     C_B1,
     C_B2,
     C_BIAS_NOISE_REST,
     C_BIAS_PROCESS,
     C_BLOCK,
-    C_FIELD_PROCESS,
-    C_FIELD_SIGMA_INIT,
-    C_HARD_IRON_INIT,
-    C_HARD_IRON_RESET,
-    C_HEADING_PROCESS,
-    C_HEADING_SIGMA_INIT,
     C_LAG,
+    C_LIN_DEADBAND,
+    C_LIN_DECAY,
+    C_LIN_WARM,
     C_MAG_DELAY,
-    C_MAG_GATE,
-    C_MAG_NOISE,
-    C_MAG_RESET_TIME,
-    C_MAG_TIMING,
     C_REST_ALPHA,
     C_REST_MIN_TIME,
     C_REST_TH_ACC,
@@ -45,6 +41,7 @@ from mocapkit.imu.filters.polaris_params import (
     HISTORY_LEN,
     S_ACC_LP,
     S_ACC_LP_STATE,
+    S_ACC_NORM_SLOW,
     S_BIAS,
     S_BLOCK_COUNT,
     S_BLOCK_TIME,
@@ -57,8 +54,10 @@ from mocapkit.imu.filters.polaris_params import (
     S_DRIFT_JZ,
     S_HISTORY,
     S_HISTORY_POS,
+    S_LIN_M2,
+    S_LIN_MEAN,
+    S_LIN_VAR,
     S_MAG_COUNT,
-    S_MAG_DIST_TIME,
     S_MAG_P,
     S_MAG_R_SUM,
     S_MAG_RATE2_SUM,
@@ -210,6 +209,12 @@ def _tilt_update(c: np.ndarray, s: np.ndarray, P: np.ndarray, R: np.ndarray, v: 
             z1 -= d3 * bx + d4 * by + d5 * bz - (s[S_DRIFT_G + 1] - s[S_DRIFT_G_LP + 1])
         at_rest = s[S_REST_TIME] >= c[C_REST_MIN_TIME]
         sigma = c[C_TILT_NOISE_REST] if at_rest else c[C_TILT_NOISE]
+        # (P7a) the linear acceleration left in the low-pass.
+        dev = (
+            math.sqrt(s[S_ACC_LP] ** 2 + s[S_ACC_LP + 1] ** 2 + s[S_ACC_LP + 2] ** 2)
+            - s[S_ACC_NORM_SLOW]
+        )
+        var = sigma * sigma + (s[S_LIN_VAR] + c[C_AC_GAIN] * dev * dev)
         i0 = z0 - (x0 + d0 * x2 + d1 * x3 + d2 * x4)
         i1 = z1 - (x1 + d3 * x2 + d4 * x3 + d5 * x4)
         # PHt (5x2) = P H^T with H = [[1, 0, d0, d1, d2], [0, 1, d3, d4, d5]].
@@ -218,10 +223,10 @@ def _tilt_update(c: np.ndarray, s: np.ndarray, P: np.ndarray, R: np.ndarray, v: 
         for r in range(5):
             ph0[r] = P[r, 0] + P[r, 2] * d0 + P[r, 3] * d1 + P[r, 4] * d2
             ph1[r] = P[r, 1] + P[r, 2] * d3 + P[r, 3] * d4 + P[r, 4] * d5
-        s00 = ph0[0] + d0 * ph0[2] + d1 * ph0[3] + d2 * ph0[4] + sigma * sigma
+        s00 = ph0[0] + d0 * ph0[2] + d1 * ph0[3] + d2 * ph0[4] + var
         s01 = ph1[0] + d0 * ph1[2] + d1 * ph1[3] + d2 * ph1[4]
         s10 = ph0[1] + d3 * ph0[2] + d4 * ph0[3] + d5 * ph0[4]
-        s11 = ph1[1] + d3 * ph1[2] + d4 * ph1[3] + d5 * ph1[4] + sigma * sigma
+        s11 = ph1[1] + d3 * ph1[2] + d4 * ph1[3] + d5 * ph1[4] + var
         det = s00 * s11 - s01 * s10
         if det > 0.0:  # S is positive definite unless the state has broken down
             v00, v01, v10, v11 = s11 / det, -s01 / det, -s10 / det, s00 / det
@@ -276,149 +281,6 @@ def _tilt_update(c: np.ndarray, s: np.ndarray, P: np.ndarray, R: np.ndarray, v: 
     s[S_REST_GYR_SUM + 1] = 0.0
     s[S_REST_GYR_SUM + 2] = 0.0
     s[S_REST_COUNT] = 0.0
-
-
-@njit(cache=True)
-def _invert3(S: np.ndarray, out: np.ndarray) -> bool:
-    """``out = inv(S)`` for a 3x3 matrix by cofactors; False (out untouched) unless the
-    determinant is positive (S is a covariance)."""
-    c00 = S[1, 1] * S[2, 2] - S[1, 2] * S[2, 1]
-    c01 = S[1, 2] * S[2, 0] - S[1, 0] * S[2, 2]
-    c02 = S[1, 0] * S[2, 1] - S[1, 1] * S[2, 0]
-    det = S[0, 0] * c00 + S[0, 1] * c01 + S[0, 2] * c02
-    if not det > 0.0:
-        return False
-    out[0, 0] = c00 / det
-    out[0, 1] = (S[0, 2] * S[2, 1] - S[0, 1] * S[2, 2]) / det
-    out[0, 2] = (S[0, 1] * S[1, 2] - S[0, 2] * S[1, 1]) / det
-    out[1, 0] = c01 / det
-    out[1, 1] = (S[0, 0] * S[2, 2] - S[0, 2] * S[2, 0]) / det
-    out[1, 2] = (S[0, 2] * S[1, 0] - S[0, 0] * S[1, 2]) / det
-    out[2, 0] = c02 / det
-    out[2, 1] = (S[0, 1] * S[2, 0] - S[0, 0] * S[2, 1]) / det
-    out[2, 2] = (S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]) / det
-    return True
-
-
-@njit(cache=True)
-def _heading_update(
-    c: np.ndarray, s: np.ndarray, P: np.ndarray, H: np.ndarray, PHt: np.ndarray,
-    S: np.ndarray, Si: np.ndarray, nu: np.ndarray,
-) -> None:  # fmt: skip
-    """(P11)-(P13) on the flat state; the matrix arguments are scratch arrays."""
-    T = s[S_BLOCK_TIME]
-    for i in range(36):
-        P[i // 6, i % 6] = s[S_MAG_P + i]
-    q_bias = 0.0
-    for r in range(3):
-        for col in range(3):
-            q_bias += s[S_DRIFT_JZ + r] * s[S_TILT_P + 5 * (2 + r) + 2 + col] * s[S_DRIFT_JZ + col]
-    P[0, 0] += c[C_HEADING_PROCESS] * c[C_HEADING_PROCESS] * T + q_bias
-    P[1, 1] += c[C_FIELD_PROCESS] * c[C_FIELD_PROCESS] * T
-    P[2, 2] += c[C_FIELD_PROCESS] * c[C_FIELD_PROCESS] * T
-    count = s[S_MAG_COUNT]
-    x = S_MAG_X
-    if count > 0.0:
-        sd = math.sin(s[x])
-        cd = math.cos(s[x])
-        for i in range(3):
-            rm0 = s[S_MAG_R_SUM + 3 * i] / count
-            rm1 = s[S_MAG_R_SUM + 3 * i + 1] / count
-            rm2 = s[S_MAG_R_SUM + 3 * i + 2] / count
-            H[i, 3] = rm0
-            H[i, 4] = rm1
-            H[i, 5] = rm2
-            predicted = rm0 * s[x + 3] + rm1 * s[x + 4] + rm2 * s[x + 5]
-            if i == 0:
-                predicted = s[x + 1] * sd + predicted
-            elif i == 1:
-                predicted = s[x + 1] * cd + predicted
-            else:
-                predicted = s[x + 2] + predicted
-            nu[i] = s[S_MAG_Y_SUM + i] / count - predicted
-        H[0, 0], H[0, 1], H[0, 2] = s[x + 1] * cd, sd, 0.0
-        H[1, 0], H[1, 1], H[1, 2] = -s[x + 1] * sd, cd, 0.0
-        H[2, 0], H[2, 1], H[2, 2] = 0.0, 0.0, 1.0
-        for r in range(6):
-            for col in range(3):
-                acc = 0.0
-                for t in range(6):
-                    acc += P[r, t] * H[col, t]
-                PHt[r, col] = acc
-        r_mag = c[C_MAG_NOISE] * c[C_MAG_NOISE] + (
-            c[C_MAG_TIMING] * c[C_MAG_TIMING] * (s[S_MAG_RATE2_SUM] / count)
-        )
-        for r in range(3):
-            for col in range(3):
-                acc = 0.0
-                for t in range(6):
-                    acc += H[r, t] * PHt[t, col]
-                S[r, col] = acc + (r_mag if r == col else 0.0)
-        d2 = math.inf  # a broken-down state (S not positive definite) counts as rejected
-        if _invert3(S, Si):
-            d2 = 0.0
-            for r in range(3):
-                for col in range(3):
-                    d2 += nu[r] * Si[r, col] * nu[col]
-        gate = c[C_MAG_GATE]
-        if d2 <= gate * gate:
-            for r in range(6):
-                k0 = PHt[r, 0] * Si[0, 0] + PHt[r, 1] * Si[1, 0] + PHt[r, 2] * Si[2, 0]
-                k1 = PHt[r, 0] * Si[0, 1] + PHt[r, 1] * Si[1, 1] + PHt[r, 2] * Si[2, 1]
-                k2 = PHt[r, 0] * Si[0, 2] + PHt[r, 1] * Si[1, 2] + PHt[r, 2] * Si[2, 2]
-                s[x + r] += k0 * nu[0] + k1 * nu[1] + k2 * nu[2]
-                for col in range(6):
-                    P[r, col] -= k0 * PHt[col, 0] + k1 * PHt[col, 1] + k2 * PHt[col, 2]
-            s[S_MAG_DIST_TIME] = 0.0
-        else:
-            dist = s[S_MAG_DIST_TIME] + T
-            if dist >= c[C_MAG_RESET_TIME]:
-                for r in range(6):
-                    for col in range(3, 6):
-                        P[r, col] = 0.0
-                        P[col, r] = 0.0
-                reset = c[C_HARD_IRON_RESET] * c[C_HARD_IRON_RESET]
-                P[3, 3] = reset
-                P[4, 4] = reset
-                P[5, 5] = reset
-                dist = 0.0
-            s[S_MAG_DIST_TIME] = dist
-    s[x] = math.atan2(math.sin(s[x]), math.cos(s[x]))
-    for r in range(6):
-        for col in range(6):
-            s[S_MAG_P + 6 * r + col] = 0.5 * (P[r, col] + P[col, r])
-    for i in range(3):
-        s[S_MAG_Y_SUM + i] = 0.0
-    for i in range(9):
-        s[S_MAG_R_SUM + i] = 0.0
-    s[S_MAG_COUNT] = 0.0
-    s[S_MAG_RATE2_SUM] = 0.0
-
-
-@njit(cache=True)
-def _start_heading(c: np.ndarray, s: np.ndarray, R: np.ndarray, mx: float, my: float,
-                   mz: float) -> None:  # fmt: skip
-    """First magnetometer sample: scale, heading and field from it; hard iron 0."""
-    scale = math.sqrt(mx * mx + my * my + mz * mz)
-    fx = R[0, 0] * (mx / scale) + R[0, 1] * (my / scale) + R[0, 2] * (mz / scale)
-    fy = R[1, 0] * (mx / scale) + R[1, 1] * (my / scale) + R[1, 2] * (mz / scale)
-    fz = R[2, 0] * (mx / scale) + R[2, 1] * (my / scale) + R[2, 2] * (mz / scale)
-    s[S_MAG_SCALE] = scale
-    s[S_MAG_X] = math.atan2(fx, fy)
-    s[S_MAG_X + 1] = math.hypot(fx, fy)
-    s[S_MAG_X + 2] = fz
-    for i in range(3, 6):
-        s[S_MAG_X + i] = 0.0
-    for i in range(36):
-        s[S_MAG_P + i] = 0.0
-    s[S_MAG_P] = c[C_HEADING_SIGMA_INIT] * c[C_HEADING_SIGMA_INIT]
-    s[S_MAG_P + 7] = c[C_FIELD_SIGMA_INIT] * c[C_FIELD_SIGMA_INIT]
-    s[S_MAG_P + 14] = c[C_FIELD_SIGMA_INIT] * c[C_FIELD_SIGMA_INIT]
-    hi = c[C_HARD_IRON_INIT] * c[C_HARD_IRON_INIT]
-    s[S_MAG_P + 21] = hi
-    s[S_MAG_P + 28] = hi
-    s[S_MAG_P + 35] = hi
-    s[S_MAG_READY] = 1.0
 
 
 @njit(cache=True)
@@ -508,11 +370,21 @@ def polaris_kernel(
         if s[S_WARMUP_COUNT] < c[C_WARMUP]:
             warm = s[S_WARMUP_COUNT] + 1.0
             s[S_WARMUP_COUNT] = warm
+        if warm == 0.0:  # (P3a) the Butterworth forgets the warm-up's running mean
+            s[S_LIN_VAR] *= c[C_LIN_DECAY]
         if use_acc[k]:
             _rotation_matrix(w, x, y, z, R)
             for i in range(3):
                 a_i = R[i, 0] * ax + R[i, 1] * ay + R[i, 2] * az
                 s[S_ACC_LP + i] = _lowpass(c, a_i, s, S_ACC_LP + i, S_ACC_LP_STATE + 2 * i, warm)
+            if warm > 0.0:  # (P3a) spread of |acc| while warming up (Welford)
+                a_n = math.sqrt(ax * ax + ay * ay + az * az)
+                d = a_n - s[S_LIN_MEAN]
+                s[S_LIN_MEAN] += d / warm
+                s[S_LIN_M2] += d * (a_n - s[S_LIN_MEAN])
+                s[S_LIN_VAR] = max(0.0, s[S_LIN_M2] / warm - c[C_LIN_DEADBAND]) * c[C_LIN_WARM]
+            lp_n = math.sqrt(s[S_ACC_LP] ** 2 + s[S_ACC_LP + 1] ** 2 + s[S_ACC_LP + 2] ** 2)
+            s[S_ACC_NORM_SLOW] += c[C_AC_ALPHA] * (lp_n - s[S_ACC_NORM_SLOW])
         # (P4) drift integrals.
         q0, q1, q2, q3 = _qmul(
             s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3], w, x, y, z
@@ -544,7 +416,7 @@ def polaris_kernel(
                 _rotation_matrix(m0, m1, m2, m3, R)
             mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
             if s[S_MAG_READY] == 0.0:
-                _start_heading(c, s, R, mx, my, mz)
+                start_heading(c, s, R, mx, my, mz)
                 hc, hs = math.cos(0.5 * s[S_MAG_X]), math.sin(0.5 * s[S_MAG_X])
             scale = s[S_MAG_SCALE]
             ux, uy, uz = mx / scale, my / scale, mz / scale
@@ -559,7 +431,7 @@ def polaris_kernel(
         if s[S_BLOCK_COUNT] >= block:
             _tilt_update(c, s, Pt, R, scratch)
             if has_mag and s[S_MAG_READY] != 0.0:
-                _heading_update(c, s, Pm, Hm, PHm, Sm, Sim, nu)
+                heading_update(c, s, Pm, Hm, PHm, Sm, Sim, nu)
                 hc, hs = math.cos(0.5 * s[S_MAG_X]), math.sin(0.5 * s[S_MAG_X])
             q0, q1, q2, q3 = _qmul(
                 s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3],

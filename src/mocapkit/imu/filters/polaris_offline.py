@@ -33,6 +33,7 @@ from mocapkit.geometry import quat_from_two_vectors, quat_mul, quat_rotate
 from mocapkit.imu.filters import polaris_params as pp
 from mocapkit.imu.filters.polaris_engine import (
     heading_pass,
+    initial_linear_acc,
     initial_tilt,
     run_pass,
     start,
@@ -105,7 +106,8 @@ def _one_pass(
     core = PolarisCore()
     q_init = initial_tilt(acc, use_acc)
     first = int(np.flatnonzero(use_acc)[0])
-    start(c, core, q_init, gyr[0], acc[first])
+    lin2 = initial_linear_acc(acc[first : first + 1], gyr[first : first + 1], float(dt[0]))
+    start(c, core, q_init, gyr[0], acc[first], lin2)
     result = run_pass(c, core, backend, gyr, acc, mag, dt, use_acc, use_mag, False, True)
     return result.aux
 

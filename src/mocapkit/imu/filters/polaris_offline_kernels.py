@@ -13,12 +13,8 @@ import math
 import numpy as np
 from numba import njit
 
-from mocapkit.imu.filters.polaris_kernels import (
-    _heading_update,
-    _qmul,
-    _rotation_matrix,
-    _start_heading,
-)
+from mocapkit.imu.filters.polaris_heading_kernels import heading_update, start_heading
+from mocapkit.imu.filters.polaris_kernels import _qmul, _rotation_matrix
 from mocapkit.imu.filters.polaris_params import (
     C_BLOCK,
     S_BLOCK_COUNT,
@@ -83,7 +79,7 @@ def heading_kernel(
             _rotation_matrix(q6[k, 0], q6[k, 1], q6[k, 2], q6[k, 3], R)
             mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
             if s[S_MAG_READY] == 0.0:
-                _start_heading(c, s, R, mx, my, mz)
+                start_heading(c, s, R, mx, my, mz)
             scale = s[S_MAG_SCALE]
             ux, uy, uz = mx / scale, my / scale, mz / scale
             for i in range(3):
@@ -96,7 +92,7 @@ def heading_kernel(
         s[S_BLOCK_TIME] += dt[k]
         if s[S_BLOCK_COUNT] >= block:
             if s[S_MAG_READY] != 0.0:
-                _heading_update(c, s, Pm, Hm, PHm, Sm, Sim, nu)
+                heading_update(c, s, Pm, Hm, PHm, Sm, Sim, nu)
             s[S_BLOCK_COUNT] = 0.0
             s[S_BLOCK_TIME] = 0.0
         out[k, 0] = s[S_MAG_X]

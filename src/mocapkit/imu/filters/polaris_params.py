@@ -68,6 +68,15 @@ class PolarisParams(FilterParams):
         rest_min_time: ... for at least this long [s].
         lag_compensation: model the lag of the low-passed measurement behind the tilt that a
             bias error causes (the ``D`` term of the measurement model).
+        motion_corr_time: correlation time [s] of a body segment's linear acceleration
+            (human motion of about 1 Hz: ``1 / (2 pi)`` s). The low-passed accelerometer is
+            gravity plus the low-passed linear acceleration; that residual changes slowly,
+            so the ``update_rate_hz`` measurements a second share it. Its variance per
+            update is therefore counted ``2 motion_corr_time update_rate`` times (the
+            number of updates that see the same error), see (P7a).
+        lin_acc_weight: weight of the residual seen in the low-passed accelerometer
+            itself (its deviation from a slower average, (P7a)); 0 uses only the
+            warm-up term.
 
     Heading (9D), a 6-state extended Kalman filter on the heading offset ``delta`` of E6
     from E, the Earth field (horizontal and vertical parts, relative to the first sample's
@@ -109,6 +118,8 @@ class PolarisParams(FilterParams):
     rest_th_acc: float = 0.5
     rest_min_time: float = 1.5
     lag_compensation: bool = True
+    motion_corr_time: float = 1.0 / (2.0 * math.pi)  # a 1 Hz motion
+    lin_acc_weight: float = 0.5  # BROAD 6D 0.646 (0: 0.630), synthetic limbs better
     mag_noise: float = 0.02  # 0.7 uT of 44 per axis, block-averaged, plus field roughness
     heading_process: float = 0.1 * _DEG  # tuned
     field_process: float = 0.016  # tuned
@@ -137,8 +148,10 @@ class PolarisParams(FilterParams):
             "hard_iron_sigma_reset",
             "mag_gate",
             "offline_tau_acc",
+            "motion_corr_time",
         )
         non_negative = (
+            "lin_acc_weight",
             "tilt_process",
             "bias_process",
             "rest_min_time",
@@ -216,12 +229,19 @@ C_HEADING_SIGMA_INIT = 26
 C_FIELD_SIGMA_INIT = 27
 C_WARMUP = 28  # samples of running mean before the low-pass takes over
 C_MAG_TIMING = 29
-N_COEFFICIENTS = 30
+C_LIN_WARM = 30  # warm-up: tilt variance [rad^2] per (m/s^2)^2 of spread of |acc|
+C_LIN_DECAY = 31  # per-sample decay of that variance once the Butterworth has taken over
+C_LIN_DEADBAND = 32  # spread [(m/s^2)^2] that is sensor noise, not motion
+C_AC_ALPHA = 33  # 1st-order factor (tau_acc / 2) of the slower average of |low-pass|
+C_AC_GAIN = 34  # tilt variance [rad^2] per (m/s^2)^2 of deviation from that average
+N_COEFFICIENTS = 35
 
 # Initial uncertainties the user does not tune: the first tilt comes from a short average
 # of the accelerometer (2 deg covers linear acceleration in it), the first heading from a
 # single magnetometer sample (10 deg covers its noise and a moderate disturbance).
 TILT_SIGMA_INIT = 2.0 * _DEG
+# Gravity [m/s^2], only to turn a linear acceleration into the tilt angle it causes.
+GRAVITY = 9.81
 HEADING_SIGMA_INIT = 10.0 * _DEG
 FIELD_SIGMA_INIT = 0.05
 
@@ -255,6 +275,19 @@ def coefficients(params: PolarisParams) -> FloatArray:
     c[C_FIELD_SIGMA_INIT] = FIELD_SIGMA_INIT
     c[C_WARMUP] = max(1, round(params.tau_acc * params.rate_hz))
     c[C_MAG_TIMING] = params.mag_timing_sigma_s
+    # (P7a) linear acceleration in the tilt measurement: a residual with correlation time
+    # motion_corr_time is seen by 2 * motion_corr_time * update rate updates. Its size is
+    # read from the norm of the accelerometer (a rotation, e.g. by a bias error, leaves
+    # the norm alone), i.e. along gravity; the two horizontal axes that tilt the
+    # measurement carry as much again each (a body's linear acceleration has no preferred
+    # direction): hence the factor 2.
+    updates_per_s = params.rate_hz / params.block_size
+    shared = 2.0 * 2.0 * params.motion_corr_time * updates_per_s / GRAVITY**2
+    c[C_LIN_WARM] = shared
+    c[C_LIN_DECAY] = math.exp(-2.0 * params.dt / params.tau_acc)
+    c[C_LIN_DEADBAND] = (params.rest_th_acc / 3.0) ** 2
+    c[C_AC_ALPHA] = 1.0 - math.exp(-2.0 * params.dt / params.tau_acc)
+    c[C_AC_GAIN] = params.lin_acc_weight * shared
     return c
 
 
@@ -282,6 +315,10 @@ class PolarisCore:
     tilt_P: FloatArray = field(default_factory=lambda: _zeros(25))
     acc_lp_state: FloatArray = field(default_factory=lambda: _zeros(6))
     acc_lp: FloatArray = field(default_factory=lambda: _zeros(3))
+    acc_norm_slow: FloatArray = field(default_factory=lambda: _zeros(1))
+    lin_mean: FloatArray = field(default_factory=lambda: _zeros(1))
+    lin_m2: FloatArray = field(default_factory=lambda: _zeros(1))
+    lin_var: FloatArray = field(default_factory=lambda: _zeros(1))
     drift_J: FloatArray = field(default_factory=lambda: _zeros(6))
     drift_J_lp_state: FloatArray = field(default_factory=lambda: _zeros(12))
     drift_J_lp: FloatArray = field(default_factory=lambda: _zeros(6))
@@ -333,6 +370,10 @@ S_BIAS = _OFFSETS["bias"]
 S_TILT_P = _OFFSETS["tilt_P"]
 S_ACC_LP_STATE = _OFFSETS["acc_lp_state"]
 S_ACC_LP = _OFFSETS["acc_lp"]
+S_ACC_NORM_SLOW = _OFFSETS["acc_norm_slow"]
+S_LIN_MEAN = _OFFSETS["lin_mean"]
+S_LIN_M2 = _OFFSETS["lin_m2"]
+S_LIN_VAR = _OFFSETS["lin_var"]
 S_DRIFT_J = _OFFSETS["drift_J"]
 S_DRIFT_J_LP_STATE = _OFFSETS["drift_J_lp_state"]
 S_DRIFT_J_LP = _OFFSETS["drift_J_lp"]

@@ -11,6 +11,12 @@ Per sample, with the bias-corrected rate ``w = gyr - b``:
   for ``rest_min_time``; at rest the gyroscope readings are summed for (P9);
 - (P3) accelerometer in I, low-passed (2nd-order Butterworth, ``tau_acc``): ``a_I``
   (for the first ``tau_acc`` seconds the running mean, so the start converges fast);
+- (P3a) how much linear acceleration is left in it, read from norms (a rotation, e.g.
+  by a bias error, leaves them alone): while warming up, the spread of ``|acc|`` around
+  its running mean (less what sensor noise explains) gives the running mean's variance
+  ``lin_var``, which then decays with the Butterworth's memory; and a slower average
+  ``acc_norm_slow`` of ``|a_I_lp|`` (time constant ``tau_acc / 2``), whose deviation
+  from ``|a_I_lp|`` shows the residual that remains while moving;
 - (P4) drift integrals for the lag model: ``J += R6[:2] dt`` and ``G += R6[:2] b dt``
   (``R6`` the 6D rotation matrix), both also low-passed with the same Butterworth;
 - (P5) magnetometer (9D): the field in E6 using the orientation ``mag_delay`` samples
@@ -24,6 +30,12 @@ b + db``):
   ``J`` (a bias error ``db`` tilts the estimate by ``-R6[:2] db dt``);
 - (P7) measurement ``z = [n_y, -n_x] * angle / sin(angle)`` from ``n = R(q_acc) a_I /
   |a_I|`` (the rotation that would bring the low-passed vertical onto z);
+- (P7a) its noise: ``tilt_noise^2 + lin_var + lin_acc_weight * 2 N (|a_I_lp| -
+  acc_norm_slow)^2 / g^2`` (``a_I_lp`` the low-passed accelerometer,
+  ``N = 2 motion_corr_time * update rate``; 2: two horizontal axes for the one seen
+  along gravity): a residual linear acceleration is shared by the updates within its
+  correlation time, and counting each as independent would make the filter explain it
+  by a gyroscope bias;
 - (P8) lag model: a bias error also tilted the low-pass memory, so ``z = tilt + D db`` with
   ``D = J - LP(J)``; the part due to the bias corrections already applied,
   ``D b - (G - LP(G))``, is known and subtracted;
@@ -37,8 +49,9 @@ mean(R6_delayed) h``:
 - (P11) propagate: random walks on ``delta`` and the field, plus the heading drift the
   bias uncertainty allows, ``Jz^T P_b Jz`` (``Jz`` the block integral of ``R6[2]``);
 - (P12) Mahalanobis gate ``nu^T S^-1 nu <= gate^2`` (the measurement noise is
-  ``mag_noise^2 + (mag_timing_sigma_s |w|)^2``, ``|w|^2`` the block mean); accepted:
-  standard EKF update;
+  ``mag_noise^2 + (mag_timing_sigma_s |w|)^2 + var(tilt)``, ``|w|^2`` the block mean,
+  ``var(tilt)`` the mean tilt variance of the inclination filter: a tilt error turns the
+  field in E6 by as much); accepted: standard EKF update;
 - (P13) rejected for ``mag_reset_time``: the hard-iron covariance is reset to
   ``hard_iron_sigma_reset^2`` (a magnet now moves with the sensor) so it is re-learnt while
   the heading is carried by the gyroscope.
@@ -109,7 +122,13 @@ def butterworth_steady_state(c: FloatArray, value: FloatArray) -> FloatArray:
 
 
 def start_core(
-    c: FloatArray, core: PolarisCore, q_init: FloatArray, gyr0: FloatArray, acc0: FloatArray
+    c: FloatArray,
+    core: PolarisCore,
+    q_init: FloatArray,
+    gyr0: FloatArray,
+    acc0: FloatArray,
+    lin2: float = 0.0,
+    n_window: int = 1,
 ) -> None:
     """Initialise ``core`` from an initial ``q_world_sensor`` and the first readings.
 
@@ -117,6 +136,12 @@ def start_core(
     ``q_acc = q_init``. The accelerometer low-pass starts at the gravity direction that
     ``q_init`` implies (with the first reading's norm), the rest low-passes at the first
     readings; the heading filter waits for the first magnetometer sample.
+
+    ``lin2`` [(m/s^2)^2]: the linear acceleration per axis in the ``n_window`` samples
+    ``q_init`` was taken from (:func:`mocapkit.imu.filters.polaris_engine.initial_linear_acc`;
+    0 at rest). It widens the initial tilt uncertainty (to at most 45 deg) and seeds the
+    warm-up's spread (P3a) as ``n_window`` samples' worth, so the first running means,
+    over too few samples to show their own spread, are not trusted as if at rest.
     """
     fresh = PolarisCore()
     for f in fields(PolarisCore):
@@ -125,6 +150,10 @@ def start_core(
     a_norm = math.sqrt(float(acc0 @ acc0))
     a_I = quat_to_matrix(core.q_acc).T @ (_UP * a_norm)
     core.acc_lp = a_I.copy()
+    core.acc_norm_slow = np.array([a_norm])
+    core.lin_mean = np.array([a_norm])
+    core.lin_m2 = np.array([lin2 * n_window])
+    core.lin_var = np.array([max(0.0, lin2 - c[pp.C_LIN_DEADBAND]) * c[pp.C_LIN_WARM]])
     core.acc_lp_state = butterworth_steady_state(c, a_I).reshape(-1)
     core.warmup_count = np.array([1.0])  # q_init counts as the first sample of the mean
     core.drift_J_lp = np.zeros(6)
@@ -132,7 +161,8 @@ def start_core(
     core.rest_gyr_lp = np.asarray(gyr0, dtype=np.float64).copy()
     core.rest_acc_lp = np.asarray(acc0, dtype=np.float64).copy()
     P = np.zeros((5, 5))
-    P[0, 0] = P[1, 1] = c[pp.C_TILT_SIGMA_INIT] ** 2
+    tilt_var = c[pp.C_TILT_SIGMA_INIT] ** 2 + lin2 / pp.GRAVITY**2
+    P[0, 0] = P[1, 1] = min(tilt_var, (0.25 * math.pi) ** 2)
     P[2, 2] = P[3, 3] = P[4, 4] = c[pp.C_BIAS_SIGMA_INIT] ** 2
     core.tilt_P = P.reshape(-1)
     core.started = np.array([1.0])
@@ -174,6 +204,23 @@ def _rest_detector(
     if core.rest_time[0] >= c[pp.C_REST_MIN_TIME]:
         core.rest_gyr_sum = core.rest_gyr_sum + gyr
         core.rest_count = core.rest_count + 1.0
+
+
+def _track_linear_acc(c: FloatArray, core: PolarisCore, acc: FloatArray, warmup: float) -> None:
+    """(P3a) after the low-pass step of a usable sample ``acc``. While warming up
+    (``warmup`` samples in the running mean) Welford's running mean and sum of squared
+    deviations of ``|acc|`` give its spread; less the deadband of sensor noise, times
+    ``C_LIN_WARM``, it is the running mean's tilt variance [rad^2]. Then the slower average
+    of ``|a_I_lp|``."""
+    if warmup > 0.0:
+        a = math.sqrt(float(acc @ acc))
+        d = a - core.lin_mean[0]
+        core.lin_mean = np.array([core.lin_mean[0] + d / warmup])
+        core.lin_m2 = np.array([core.lin_m2[0] + d * (a - core.lin_mean[0])])
+        spread = max(0.0, core.lin_m2[0] / warmup - c[pp.C_LIN_DEADBAND])
+        core.lin_var = np.array([spread * c[pp.C_LIN_WARM]])
+    norm = math.sqrt(float(core.acc_lp @ core.acc_lp))
+    core.acc_norm_slow = core.acc_norm_slow + c[pp.C_AC_ALPHA] * (norm - core.acc_norm_slow)
 
 
 def _accumulate_drift(
@@ -247,9 +294,12 @@ def _tilt_update(c: FloatArray, core: PolarisCore) -> None:
         H[:, 2:5] = D
         at_rest = core.rest_time[0] >= c[pp.C_REST_MIN_TIME]
         sigma = c[pp.C_TILT_NOISE_REST] if at_rest else c[pp.C_TILT_NOISE]
+        # (P7a) the linear acceleration left in the low-pass.
+        deviation = math.sqrt(float(core.acc_lp @ core.acc_lp)) - core.acc_norm_slow[0]
+        r_lin = core.lin_var[0] + c[pp.C_AC_GAIN] * deviation * deviation
         innovation = z - H @ x
         PHt = P @ H.T
-        S = H @ PHt + np.eye(2) * sigma**2
+        S = H @ PHt + np.eye(2) * (sigma * sigma + r_lin)
         if np.linalg.det(S) > 0.0:  # positive definite unless the state has broken down
             K = PHt @ np.linalg.inv(S)
             x = x + K @ innovation
@@ -300,7 +350,10 @@ def _heading_update(c: FloatArray, core: PolarisCore) -> None:
         H[:, 3:6] = R_mean
         PHt = P @ H.T
         rate2 = float(core.mag_rate2_sum[0]) / count
-        S = H @ PHt + np.eye(3) * (c[pp.C_MAG_NOISE] ** 2 + c[pp.C_MAG_TIMING] ** 2 * rate2)
+        # the field in E6 also turns with the tilt error of the 6D estimate
+        tilt_var = 0.5 * (core.tilt_P[0] + core.tilt_P[6])
+        r_mag = c[pp.C_MAG_NOISE] ** 2 + c[pp.C_MAG_TIMING] ** 2 * rate2 + tilt_var
+        S = H @ PHt + np.eye(3) * r_mag
         # A broken-down state (S not positive definite) counts as rejected.
         positive = np.linalg.det(S) > 0.0
         S_inv = np.linalg.inv(S) if positive else np.zeros((3, 3))
@@ -374,11 +427,14 @@ def run_reference(
         count = core.warmup_count[0] + 1.0 if core.warmup_count[0] < c[pp.C_WARMUP] else 0.0
         if count > 0.0:
             core.warmup_count = np.array([count])
+        if count == 0.0:  # the Butterworth forgets the warm-up's running mean
+            core.lin_var = core.lin_var * c[pp.C_LIN_DECAY]
         if use_acc[k]:
             a_I = quat_to_matrix(core.q_gyr) @ acc[k]
             state = core.acc_lp_state.reshape(3, 2)
             core.acc_lp = _lowpass_step(c, a_I, core.acc_lp, state, count)
             core.acc_lp_state = state.reshape(-1)
+            _track_linear_acc(c, core, acc[k], count)
         # (P4) drift integrals.
         q6 = quat_mul(core.q_acc, core.q_gyr)
         _accumulate_drift(c, core, quat_to_matrix(q6), step, count)
