@@ -44,3 +44,4 @@ bench: $(BENCH_STAMP)
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache .hypothesis
+	find src tests benchmarks -name '*.nbi' -delete -o -name '*.nbc' -delete

@@ -394,7 +394,7 @@ NOTES = [
     "aper | --reference OutputReference_subject01_walk1_ik.mot] -o DIR`.",
     "- Frame rates on this shared machine vary by 2x between runs (OpenSim measured 53-125 "
     "frames/s on this trial across our runs; its quiet-machine figure is 98-101); both sides "
-    "are timed in the same run. The lead's quiet re-run is the reference for the 20x target.",
+    "are timed in the same run. The quiet re-run (Summary) is the reference for the 20x target.",
 ]
 
 

@@ -14,6 +14,7 @@ import numpy as np
 from numba import njit
 
 from mocapkit.geometry.euler import GIMBAL_TOLERANCE
+from mocapkit.geometry.kernels import conj_mul_into, quat_mul_into
 
 _PI = math.pi
 
@@ -21,28 +22,6 @@ _PI = math.pi
 @njit(cache=True, inline="always")
 def _wrap(a: float) -> float:
     return _PI - np.mod(_PI - a, 2.0 * _PI)
-
-
-@njit(cache=True, inline="always")
-def _mul(a, b, out):
-    """out = a * b (Hamilton); out may not alias a or b."""
-    w1, x1, y1, z1 = a[0], a[1], a[2], a[3]
-    w2, x2, y2, z2 = b[0], b[1], b[2], b[3]
-    out[0] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
-    out[1] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
-    out[2] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
-    out[3] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
-
-
-@njit(cache=True, inline="always")
-def _conj_mul(a, b, out):
-    """out = conj(a) * b."""
-    w1, x1, y1, z1 = a[0], -a[1], -a[2], -a[3]
-    w2, x2, y2, z2 = b[0], b[1], b[2], b[3]
-    out[0] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
-    out[1] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
-    out[2] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
-    out[3] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
 
 
 @njit(cache=True)
@@ -107,8 +86,8 @@ def frame_kernel(
                     qs[c] = last_q[i, c]
                 ok = True
         if ok:
-            _mul(heading[i], qs, tmp)
-            _mul(tmp, mount[i], rel)
+            quat_mul_into(heading[i], qs, tmp)
+            quat_mul_into(tmp, mount[i], rel)
             for c in range(4):
                 q_seg[i, c] = rel[c]
         else:
@@ -119,11 +98,11 @@ def frame_kernel(
         near[i] = False
         p = parents[i]
         if p < 0:
-            _conj_mul(q_wg, q_seg[i], rel)
+            conj_mul_into(q_wg, q_seg[i], rel)
         else:
-            _conj_mul(q_seg[p], q_seg[i], rel)
-        _conj_mul(q_b[i], rel, tmp)
-        _mul(tmp, q_b[i], rel)
+            conj_mul_into(q_seg[p], q_seg[i], rel)
+        conj_mul_into(q_b[i], rel, tmp)
+        quat_mul_into(tmp, q_b[i], rel)
         if not (math.isfinite(rel[0]) and math.isfinite(rel[1])
                 and math.isfinite(rel[2]) and math.isfinite(rel[3])):  # fmt: skip
             ang[0] = np.nan

@@ -8,7 +8,7 @@ import math
 import numpy as np
 from numba import njit
 
-from mocapkit.imu.filters.kernel_util import quat_mul_into
+from mocapkit.geometry.kernels import quat_mul_into
 
 _G_REF = np.array([0.0, 0.0, 1.0])
 

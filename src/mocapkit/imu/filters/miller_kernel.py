@@ -12,7 +12,7 @@ import math
 import numpy as np
 from numba import njit
 
-from mocapkit.imu.filters.kernel_util import quat_mul_into, rotate_inv_into
+from mocapkit.geometry.kernels import quat_mul_into, rotate_inv_into
 
 _MIN_PROJECTION = 1e-9
 _G_REF = np.array([0.0, 0.0, 1.0])

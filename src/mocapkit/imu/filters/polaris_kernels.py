@@ -13,6 +13,7 @@ import math
 import numpy as np
 from numba import njit
 
+from mocapkit.geometry.kernels import qmul, rotation_matrix_into
 from mocapkit.imu.filters.polaris_heading_kernels import heading_update, start_heading
 from mocapkit.imu.filters.polaris_params import (
     C_A1,
@@ -75,36 +76,6 @@ from mocapkit.imu.filters.polaris_params import (
     S_TILT_P,
     S_WARMUP_COUNT,
 )
-
-
-@njit(cache=True, inline="always")
-def _qmul(
-    a0: float, a1: float, a2: float, a3: float, b0: float, b1: float, b2: float, b3: float
-) -> tuple[float, float, float, float]:
-    """Hamilton product (same formula as ``geometry.quat_mul``)."""
-    return (
-        a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
-        a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2,
-        a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1,
-        a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0,
-    )
-
-
-@njit(cache=True, inline="always")
-def _rotation_matrix(w: float, x: float, y: float, z: float, R: np.ndarray) -> None:
-    """``R = quat_to_matrix([w, x, y, z])`` (same formula as ``geometry``)."""
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    wx, wy, wz = w * x, w * y, w * z
-    R[0, 0] = 1 - 2 * (yy + zz)
-    R[0, 1] = 2 * (xy - wz)
-    R[0, 2] = 2 * (xz + wy)
-    R[1, 0] = 2 * (xy + wz)
-    R[1, 1] = 1 - 2 * (xx + zz)
-    R[1, 2] = 2 * (yz - wx)
-    R[2, 0] = 2 * (xz - wy)
-    R[2, 1] = 2 * (yz + wx)
-    R[2, 2] = 1 - 2 * (xx + yy)
 
 
 @njit(cache=True, inline="always")
@@ -183,7 +154,7 @@ def _tilt_update(c: np.ndarray, s: np.ndarray, P: np.ndarray, R: np.ndarray, v: 
                 P[r, 3] -= kr * k3 * sv
                 P[r, 4] -= kr * k4 * sv
     # (P7) tilt measurement.
-    _rotation_matrix(s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3], R)
+    rotation_matrix_into(s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3], R)
     ax, ay, az = s[S_ACC_LP], s[S_ACC_LP + 1], s[S_ACC_LP + 2]
     ex = R[0, 0] * ax + R[0, 1] * ay + R[0, 2] * az
     ey = R[1, 0] * ax + R[1, 1] * ay + R[1, 2] * az
@@ -243,12 +214,12 @@ def _tilt_update(c: np.ndarray, s: np.ndarray, P: np.ndarray, R: np.ndarray, v: 
     angle = math.sqrt(x0 * x0 + x1 * x1)
     if angle > 1e-15:
         sh = math.sin(0.5 * angle) / angle
-        w, qx, qy, qz = _qmul(
+        w, qx, qy, qz = qmul(
             math.cos(0.5 * angle), sh * x0, sh * x1, 0.0,
             s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3],
         )  # fmt: skip
     else:
-        w, qx, qy, qz = _qmul(
+        w, qx, qy, qz = qmul(
             1.0, 0.0, 0.0, 0.0, s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3]
         )
     n = math.sqrt(w * w + qx * qx + qy * qy + qz * qz)
@@ -329,7 +300,7 @@ def polaris_kernel(
         else:
             sh = math.sin(0.5 * angle) / angle
             dw, dx, dy, dz = math.cos(0.5 * angle), sh * wx, sh * wy, sh * wz
-        w, x, y, z = _qmul(
+        w, x, y, z = qmul(
             s[S_Q_GYR], s[S_Q_GYR + 1], s[S_Q_GYR + 2], s[S_Q_GYR + 3], dw, dx, dy, dz
         )
         n = math.sqrt(w * w + x * x + y * y + z * z)
@@ -373,7 +344,7 @@ def polaris_kernel(
         if warm == 0.0:  # (P3a) the Butterworth forgets the warm-up's running mean
             s[S_LIN_VAR] *= c[C_LIN_DECAY]
         if use_acc[k]:
-            _rotation_matrix(w, x, y, z, R)
+            rotation_matrix_into(w, x, y, z, R)
             for i in range(3):
                 a_i = R[i, 0] * ax + R[i, 1] * ay + R[i, 2] * az
                 s[S_ACC_LP + i] = _lowpass(c, a_i, s, S_ACC_LP + i, S_ACC_LP_STATE + 2 * i, warm)
@@ -386,10 +357,10 @@ def polaris_kernel(
             lp_n = math.sqrt(s[S_ACC_LP] ** 2 + s[S_ACC_LP + 1] ** 2 + s[S_ACC_LP + 2] ** 2)
             s[S_ACC_NORM_SLOW] += c[C_AC_ALPHA] * (lp_n - s[S_ACC_NORM_SLOW])
         # (P4) drift integrals.
-        q0, q1, q2, q3 = _qmul(
+        q0, q1, q2, q3 = qmul(
             s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3], w, x, y, z
         )
-        _rotation_matrix(q0, q1, q2, q3, R)
+        rotation_matrix_into(q0, q1, q2, q3, R)
         bx, by, bz = s[S_BIAS], s[S_BIAS + 1], s[S_BIAS + 2]
         for i in range(2):
             for jj in range(3):
@@ -409,11 +380,11 @@ def polaris_kernel(
         if has_mag and use_mag[k]:
             if delay > 0:  # else R already holds R6 = R(q_acc * q_gyr), the same numbers
                 hp = S_HISTORY + 4 * ((pos - delay) % HISTORY_LEN)
-                m0, m1, m2, m3 = _qmul(
+                m0, m1, m2, m3 = qmul(
                     s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3],
                     s[hp], s[hp + 1], s[hp + 2], s[hp + 3],
                 )  # fmt: skip
-                _rotation_matrix(m0, m1, m2, m3, R)
+                rotation_matrix_into(m0, m1, m2, m3, R)
             mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
             if s[S_MAG_READY] == 0.0:
                 start_heading(c, s, R, mx, my, mz)
@@ -433,7 +404,7 @@ def polaris_kernel(
             if has_mag and s[S_MAG_READY] != 0.0:
                 heading_update(c, s, Pm, Hm, PHm, Sm, Sim, nu)
                 hc, hs = math.cos(0.5 * s[S_MAG_X]), math.sin(0.5 * s[S_MAG_X])
-            q0, q1, q2, q3 = _qmul(
+            q0, q1, q2, q3 = qmul(
                 s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3],
                 s[S_Q_GYR], s[S_Q_GYR + 1], s[S_Q_GYR + 2], s[S_Q_GYR + 3],
             )  # fmt: skip
@@ -445,7 +416,7 @@ def polaris_kernel(
         # q6 = q_acc * q_gyr: from (P4), or recomputed above after a block update.
         out6[k, 0], out6[k, 1], out6[k, 2], out6[k, 3] = q0, q1, q2, q3
         if s[S_MAG_READY] != 0.0:
-            h0, h1, h2, h3 = _qmul(hc, 0.0, 0.0, hs, q0, q1, q2, q3)
+            h0, h1, h2, h3 = qmul(hc, 0.0, 0.0, hs, q0, q1, q2, q3)
             out9[k, 0], out9[k, 1], out9[k, 2], out9[k, 3] = h0, h1, h2, h3
         else:
             out9[k, 0], out9[k, 1], out9[k, 2], out9[k, 3] = q0, q1, q2, q3

@@ -13,8 +13,8 @@ import math
 import numpy as np
 from numba import njit
 
+from mocapkit.geometry.kernels import qmul, rotation_matrix_into
 from mocapkit.imu.filters.polaris_heading_kernels import heading_update, start_heading
-from mocapkit.imu.filters.polaris_kernels import _qmul, _rotation_matrix
 from mocapkit.imu.filters.polaris_params import (
     C_BLOCK,
     S_BLOCK_COUNT,
@@ -45,7 +45,7 @@ def strapdown_kernel(gyr: np.ndarray, bias: np.ndarray, dt: np.ndarray, out: np.
         else:
             sh = math.sin(0.5 * angle) / angle
             dw, dx, dy, dz = math.cos(0.5 * angle), sh * wx, sh * wy, sh * wz
-        w, x, y, z = _qmul(w, x, y, z, dw, dx, dy, dz)
+        w, x, y, z = qmul(w, x, y, z, dw, dx, dy, dz)
         n = math.sqrt(w * w + x * x + y * y + z * z)
         w, x, y, z = w / n, x / n, y / n, z / n
         out[k, 0], out[k, 1], out[k, 2], out[k, 3] = w, x, y, z
@@ -76,7 +76,7 @@ def heading_kernel(
     nu = np.empty(3)
     for k in range(q6.shape[0]):
         if use_mag[k]:
-            _rotation_matrix(q6[k, 0], q6[k, 1], q6[k, 2], q6[k, 3], R)
+            rotation_matrix_into(q6[k, 0], q6[k, 1], q6[k, 2], q6[k, 3], R)
             mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
             if s[S_MAG_READY] == 0.0:
                 start_heading(c, s, R, mx, my, mz)
