@@ -21,8 +21,10 @@ def test_structure() -> None:
         "hip_flexion_r",
         "knee_angle_l",
         "ankle_angle_r",
-        "lumbar_extension",
-        "pronation_l",
+        "abdomen_extension",
+        "elbow_flex_r",
+        "pro_sup_l",
+        "wrist_dev_r",
     ):
         assert name in h.dof_names
     lo, hi = h.dof_limits()
@@ -48,7 +50,8 @@ def test_mass_matrix_matches_kinetic_energy() -> None:
 
 
 def test_conventions_of_signs() -> None:
-    """Hip flexion moves the knee forward, knee_angle < 0 moves the ankle back (gait2392)."""
+    """Hip flexion moves the knee forward, knee_angle > 0 moves the ankle back (Rajagopal;
+    gait2392's knee is negative in flexion), elbow_flex > 0 brings the hand forward."""
     h = build_human_model(1.8, 75.0)
     data = h.model.createData()
 
@@ -61,8 +64,11 @@ def test_conventions_of_signs() -> None:
     q[h.dof_index("hip_flexion_r") + 1] = 0.3
     assert pos(q, "shank_r")[0] > pos(q0, "shank_r")[0] + 0.1
     q = q0.copy()
-    q[h.dof_index("knee_angle_r") + 1] = -0.5
+    q[h.dof_index("knee_angle_r") + 1] = 0.5
     assert pos(q, "talus_r")[0] < pos(q0, "talus_r")[0] - 0.1
+    q = q0.copy()
+    q[h.dof_index("elbow_flex_l") + 1] = 1.0
+    assert pos(q, "hand_l")[0] > pos(q0, "hand_l")[0] + 0.15
     q = q0.copy()
     q[h.dof_index("hip_adduction_r") + 1] = 0.3
     assert pos(q, "shank_r")[1] > pos(q0, "shank_r")[1] + 0.05  # right leg moves left

@@ -121,8 +121,10 @@ def test_paper_grouping_tracks_its_four_markers(case: dict) -> None:
         OSCParams(substeps=4),
     )
     idx = [names.index(m) for level in levels for m in level]
-    # four independent markers of a fast synthetic motion: measured 5.8 mm at most
-    assert np.nanmax(E[:, idx]) < 8e-3
+    # four independent markers of a fast synthetic motion (every DOF moving at up to 2.5
+    # rad/s): measured 1.3 mm mean, 9.3 mm at most (the first frames, catching up)
+    assert np.nanmean(E[:, idx]) < 2e-3
+    assert np.nanmax(E[:, idx]) < 12e-3
 
 
 def test_osc_input_errors(case: dict) -> None:

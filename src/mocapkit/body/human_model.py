@@ -6,16 +6,16 @@ Joints (anatomical, parent -> child segment):
 joint           segments               degrees of freedom (Pinocchio joints, in order)
 ============== ====================== ===================================================
 root            world -> pelvis        free-flyer (6)
-lumbar          pelvis -> abdomen      lumbar_extension, lumbar_bending, lumbar_rotation
+lumbar          pelvis -> abdomen      abdomen_extension, abdomen_bending, abdomen_rotation
 thorax          abdomen -> thorax      thorax_extension, thorax_bending, thorax_rotation
-neck            thorax -> neck         neck_extension, neck_bending, neck_rotation
+neck            thorax -> neck         cervical_extension, cervical_bending, cervical_rotation
 head            neck -> head           head_extension
 sternoclav_s    thorax -> clavicle_s   sc_elevation_s, sc_protraction_s
 shoulder_s      clavicle_s -> upper_arm_s  shoulder_flexion_s, shoulder_adduction_s,
                                        shoulder_rotation_s
-elbow_s         upper_arm_s -> ulna_s  elbow_flexion_s
-forearm_s       ulna_s -> forearm_s    pronation_s
-wrist_s         forearm_s -> hand_s    wrist_flexion_s, wrist_deviation_s
+elbow_s         upper_arm_s -> ulna_s  elbow_flex_s
+forearm_s       ulna_s -> forearm_s    pro_sup_s
+wrist_s         forearm_s -> hand_s    wrist_flex_s, wrist_dev_s
 hip_s           pelvis -> thigh_s      hip_flexion_s, hip_adduction_s, hip_rotation_s
 knee_s          thigh_s -> shank_s     knee_angle_s
 ankle_s         shank_s -> talus_s     ankle_angle_s
@@ -31,11 +31,23 @@ child segment's inertia.
 Frames: at the neutral configuration every segment frame is parallel to the world
 (x forward, y left, z up) with its origin at the segment's proximal joint centre
 (pelvis: the mid-point between the hip joint centres). Axes, order and signs of the
-DOFs copy OpenSim's gait2392 (Delp et al. 1990) wherever it has the joint, converted
-from its y-up frames (x fwd, y up, z right) by ``a_ours = (a_x, -a_z, a_y)``: hip
-flexion/adduction/rotation (positive = flexion, adduction, internal rotation),
-``knee_angle`` negative in flexion, the oblique ankle, subtalar and mtp axes, lumbar
-extension/bending/rotation. Shoulders follow the hip's convention.
+DOFs follow OpenSim's Rajagopal (2015) model, which the body (IMU) side uses, converted
+from OpenSim's y-up body frames (x fwd, y up, z right) by ``a_ours = (a_x, -a_z, a_y)``:
+hip flexion/adduction/rotation (positive = flexion, adduction, internal rotation),
+``knee_angle`` positive in flexion about Rajagopal's walker-knee axis (gait2392's knee
+turns about an axis 4 deg away and is negative in flexion), the oblique ankle,
+subtalar and mtp axes (gait2392's = Rajagopal's), the elbow's oblique flexion axis and the
+forearm's pronation axis (Rajagopal's ``elbow_r`` / ``radioulnar_r``, the pronation axis
+made orthogonal to the elbow axis as the body side decomposes them), the wrist's flexion
+then deviation. Shoulders follow the hip's convention.
+
+Names: a DOF carries an OpenSim name only where it means what OpenSim's coordinate
+means (hips, knees, ankles, subtalar, mtp, ``elbow_flex``, ``pro_sup``, ``wrist_flex``,
+``wrist_dev``). The spine, neck and shoulder have more joints than Rajagopal's (who has
+one ``back`` joint, no neck, and no shoulder girdle), so their DOFs have their own names
+(``abdomen_*``, ``thorax_*``, ``cervical_*``, ``head_extension``, ``sc_*``, ``shoulder_*``)
+and OpenSim's ``lumbar_*`` (thorax on pelvis), ``neck_*`` (head on thorax) and ``arm_*``
+(upper arm on thorax) are computed from them (:mod:`mocapkit.markers.coordinates`).
 
 Geometry: segment lengths from de Leva (1996) scaled by stature; offsets de Leva does
 not give (hip-centre spacing, lumbar offset, ankle/subtalar/mtp geometry, foot centre
@@ -92,6 +104,44 @@ def _side_sign(side: str) -> float:
     return -1.0 if side == "r" else 1.0  # y is left
 
 
+# Rajagopal (2015) right elbow flexion (in the humerus) and pronation (in the ulna) axes in
+# OpenSim's body frames (x fwd, y up, z right), the numbers of the body presets' elbow_r.
+_ELBOW_AXIS_OPENSIM = (0.226, 0.0223, 0.9739)
+_PRO_SUP_AXIS_OPENSIM = (0.0564, 0.9984, 0.002)
+# Rajagopal's walker_knee_r flexion axis (in the femur; 4 deg from gait2392's pure z, and
+# pointing the other way: knee_angle is positive in flexion), as the body presets' tibia_r.
+_KNEE_AXIS_OPENSIM = (0.0, -0.0707, -0.9975)
+
+
+def _to_ours(a: tuple[float, float, float], m: float) -> np.ndarray:
+    """A right-side axis in OpenSim's body frame -> our frame (``(x, -z, y)``), mirrored to
+    the left side (``m = -1``: x and y of the axis negated in OpenSim's frame, as the
+    body presets' ``_l`` joints)."""
+    x, y, z = a[0] * m, a[1] * m, a[2]
+    v = np.array([x, -z, y])
+    return v / np.linalg.norm(v)
+
+
+def _axis(a: tuple[float, float, float], m: float) -> tuple[float, float, float]:
+    v = _to_ours(a, m)
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+def _elbow_axis(m: float) -> tuple[float, float, float]:
+    return _axis(_ELBOW_AXIS_OPENSIM, m)
+
+
+def _pro_sup_axis(m: float) -> tuple[float, float, float]:
+    """Rajagopal's pronation axis made orthogonal to the elbow axis (Gram-Schmidt; 2.1 deg
+    away), so that elbow then pronation is exactly what the body side's ``elbow_r`` joint
+    decomposes (flexion, an unreported middle angle of zero, pronation)."""
+    e = np.asarray(_elbow_axis(m))
+    p = _to_ours(_PRO_SUP_AXIS_OPENSIM, m)
+    p = p - (p @ e) * e
+    p /= np.linalg.norm(p)
+    return (float(p[0]), float(p[1]), float(p[2]))
+
+
 def _joints(height_m: float, sex: Sex) -> list[JointSpec]:
     """The skeleton's joints for a subject of ``height_m`` (before segment scaling)."""
     p = segment_parameters(height_m, 70.0, sex)  # lengths do not depend on mass
@@ -105,9 +155,9 @@ def _joints(height_m: float, sex: Sex) -> list[JointSpec]:
             "abdomen",
             (-0.031 * k, 0.0, L["lower_trunk"]),
             (
-                Dof("lumbar_extension", ey, -70, 45),
-                Dof("lumbar_bending", ex, -40, 40),
-                Dof("lumbar_rotation", ez, -45, 45),
+                Dof("abdomen_extension", ey, -70, 45),
+                Dof("abdomen_bending", ex, -40, 40),
+                Dof("abdomen_rotation", ez, -45, 45),
             ),
         ),
         JointSpec(
@@ -127,9 +177,9 @@ def _joints(height_m: float, sex: Sex) -> list[JointSpec]:
             "neck",
             (-0.018 * k, 0.0, L["upper_trunk"]),
             (
-                Dof("neck_extension", ey, -60, 70),
-                Dof("neck_bending", ex, -45, 45),
-                Dof("neck_rotation", ez, -80, 80),
+                Dof("cervical_extension", ey, -60, 70),
+                Dof("cervical_bending", ex, -45, 45),
+                Dof("cervical_rotation", ez, -80, 80),
             ),
         ),
         JointSpec(
@@ -171,14 +221,14 @@ def _joints(height_m: float, sex: Sex) -> list[JointSpec]:
                 f"upper_arm_{s}",
                 f"ulna_{s}",
                 (0.0, 0.0, -L["upper_arm"]),
-                (Dof(f"elbow_flexion_{s}", ey, -5, 155),),
+                (Dof(f"elbow_flex_{s}", _elbow_axis(m), -5, 155),),
             ),
             JointSpec(
                 f"forearm_{s}",
                 f"ulna_{s}",
                 f"forearm_{s}",
                 (0.0, 0.0, 0.0),
-                (Dof(f"pronation_{s}", (0.0, 0.0, m), -90, 180),),
+                (Dof(f"pro_sup_{s}", _pro_sup_axis(m), -90, 180),),
             ),
             JointSpec(
                 f"wrist_{s}",
@@ -186,8 +236,8 @@ def _joints(height_m: float, sex: Sex) -> list[JointSpec]:
                 f"hand_{s}",
                 (0.0, 0.0, -L["forearm"]),
                 (
-                    Dof(f"wrist_flexion_{s}", ey, -75, 80),
-                    Dof(f"wrist_deviation_{s}", (m, 0.0, 0.0), -25, 45),
+                    Dof(f"wrist_flex_{s}", ey, -75, 80),
+                    Dof(f"wrist_dev_{s}", (m, 0.0, 0.0), -25, 45),
                 ),
             ),
             JointSpec(
@@ -206,7 +256,7 @@ def _joints(height_m: float, sex: Sex) -> list[JointSpec]:
                 f"thigh_{s}",
                 f"shank_{s}",
                 (0.0, 0.0, -L["thigh"]),
-                (Dof(f"knee_angle_{s}", ey, -135, 10),),
+                (Dof(f"knee_angle_{s}", _axis(_KNEE_AXIS_OPENSIM, m), -10, 135),),
             ),
             JointSpec(
                 f"ankle_{s}",

@@ -17,7 +17,10 @@ A marker set is a YAML file (presets in ``mocapkit/body/markersets/``)::
     coordinate_tasks: {subtalar_angle_r: {value: 0.0, weight: 1000}}
     static:                       # optional: the static trial's IK (marker placement)
       weights: {R.ASIS: 1000, ...}
-      coordinate_tasks: {lumbar_extension: {value: 0.0, weight: 1000}}
+      coordinate_tasks: {abdomen_extension: {value: 0.0, weight: 1000}}
+
+Coordinate tasks name model DOFs or OpenSim coordinates the model computes from several
+DOFs (``lumbar_extension``: see :func:`mocapkit.markers.coordinates.resolve_coordinate_tasks`).
 
 Offsets are metres in the segment frame of :mod:`mocapkit.body.human_model` (x forward,
 y left, z up at the neutral pose, origin at the proximal joint centre). For a subject

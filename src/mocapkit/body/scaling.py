@@ -42,7 +42,7 @@ LANDMARK_WEIGHT = 10.0
 # a prior of this weight [m² / rad²] towards 0 in the static IK (a 10° deviation then costs
 # like a 17 cm error on a marker of weight 1).
 STATIC_NEUTRAL_WEIGHT = 1.0
-STATIC_NEUTRAL_PREFIXES = ("lumbar_", "thorax_", "neck_", "head_", "sc_")
+STATIC_NEUTRAL_PREFIXES = ("abdomen_", "thorax_", "cervical_", "head_", "sc_")
 
 
 @dataclass(frozen=True)

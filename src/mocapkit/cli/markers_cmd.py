@@ -84,6 +84,13 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         default=None,
         help="zero-phase Butterworth low-pass cut-off [Hz] (default off)",
     )
+    p.add_argument(
+        "--ik-setup",
+        type=Path,
+        default=None,
+        help="OpenSim IK setup XML (e.g. subject01_Setup_IK.xml): its marker weights, "
+        "coordinate tasks and time range (--start-s/--end-s win)",
+    )
     p.add_argument("--start-s", type=float, default=None, help="first time to use [s]")
     p.add_argument("--end-s", type=float, default=None, help="last time to use [s]")
     p.add_argument(
@@ -101,6 +108,8 @@ _GAIT = "../shared/data/opensim/gait2392"
 _EX_RECONSTRUCT = f"""examples:
   mocapkit markers reconstruct {_GAIT}/subject01_walk1.trc \\
       --static {_GAIT}/subject01_static.trc --height-m 1.8034 --mass-kg 72.6 -o walk.mot --json
+  mocapkit markers reconstruct {_GAIT}/subject01_walk1.trc --static {_GAIT}/subject01_static.trc \\
+      --ik-setup {_GAIT}/subject01_Setup_IK.xml --method ik -o walk_ik.mot
   mocapkit markers reconstruct ../shared/data/c3d/walking2.c3d --markerset walking2 --method ik \\
       -o walking2.mot
 """
@@ -164,6 +173,13 @@ def register(subparsers: Any) -> None:
         default=None,
         help="a .mot to compare joint angles with (e.g. OpenSim's IK)",
     )
+    rep.add_argument(
+        "--reference-model",
+        choices=("auto", "gait2392", "rajagopal"),
+        default="auto",
+        help="whose sign conventions the reference uses (gait2392: knee flexion negative; "
+        "auto: told from the knee columns); default auto",
+    )
     rep.add_argument("--json", action="store_true", help="print the report's figures")
     rep.set_defaults(func=_report)
     ins = sub.add_parser(
@@ -192,8 +208,9 @@ def _run(args: argparse.Namespace) -> Any:
         ik=IKParams(backend=args.backend),
     )  # fmt: skip
     return run(
-        args.trial, args.static, args.markerset, args.height_m, args.mass_kg, options, args.sex
-    )
+        args.trial, args.static, args.markerset, args.height_m, args.mass_kg, options, args.sex,
+        args.ik_setup,
+    )  # fmt: skip
 
 
 def _reconstruct(args: argparse.Namespace) -> int:
@@ -223,7 +240,9 @@ def _report(args: argparse.Namespace) -> int:
     from mocapkit.viz.marker_report import write_report
 
     result, _subject, _cleaning = _run(args)
-    summary = write_report(result, args.output, reference=args.reference)
+    summary = write_report(
+        result, args.output, reference=args.reference, reference_model=args.reference_model
+    )
     if args.json:
         print_json(summary)
     else:

@@ -66,15 +66,13 @@ def prior_arrays(
     posture_weight: float,
 ) -> tuple[FloatArray, FloatArray]:
     """(nq,) values and weights of the quadratic terms on revolute coordinates."""
+    from mocapkit.markers.coordinates import resolve_coordinate_tasks
+
     value = np.asarray(q_posture, dtype=float).copy()
     weight = np.zeros(human.nq)
     weight[7:] = posture_weight
-    for name, (val, w) in coordinate_tasks.items():
-        if name not in human.dof_names:
-            raise ConfigError(
-                f"coordinate task {name!r}: not a DOF of the model; DOFs: "
-                f"{', '.join(human.dof_names)}"
-            )
+    tasks, _ = resolve_coordinate_tasks(human, coordinate_tasks)
+    for name, (val, w) in tasks.items():
         i = human.dof_index(name) + 1
         value[i] = val
         weight[i] = w

@@ -26,6 +26,8 @@ from mocapkit._validate import FloatArray
 from mocapkit.body.human_model import HumanModel
 from mocapkit.errors import ConfigError, DataError
 from mocapkit.markers import rigid_fast
+from mocapkit.markers.coordinates import resolve_coordinate_tasks
+from mocapkit.markers.determined import dof_marker_table
 from mocapkit.markers.kinematics import MarkerKinematics
 from mocapkit.markers.osc_kernels import osc_frame, osc_trial
 from mocapkit.markers.prioritized import DEFAULT_DAMPING
@@ -45,6 +47,20 @@ class OSCParams:
         posture_kp, posture_kd: posture task gains [1/s², 1/s].
         damping: relative damping of the least squares within a priority level (0: the
             paper's exact pseudo-inverses; see :mod:`mocapkit.markers.prioritized`).
+        max_speed: cap on each joint's (and the pelvis') angular speed [rad/s] and, as
+            ``max_speed / 4`` [m/s], on the pelvis' linear speed in the simulation: a
+            safety net above human motion (pitching peaks near 120 rad/s at the shoulder,
+            gait below 10) that stops the runaway a nearly singular set of markers can
+            start (walking2 with four visible markers diverged without it).
+        max_error_m: a marker's position error enters its commanded acceleration at most
+            this long [m] (direction kept): a marker far from the model is reached over a
+            few frames instead of in one leap that the linearisation cannot follow (the
+            bound, eq. 15, still sees the whole error). A safety net: markers that appear
+            are placed by ``reacquire`` first.
+        reacquire: when tracked markers appear (after a gap, or for the first time), fit
+            the pelvis and the DOFs carrying them to the visible markers before simulating
+            the frame (:func:`mocapkit.markers.osc_kernels.reacquire`); False: the paper's
+            pure simulation, which chases such markers over several frames.
         backend: ``"fast"`` (numba) or ``"reference"`` (Pinocchio + numpy).
     """
 
@@ -53,6 +69,9 @@ class OSCParams:
     posture_kp: float = 25.0
     posture_kd: float = 10.0
     damping: float = DEFAULT_DAMPING
+    max_speed: float = 150.0
+    max_error_m: float = 0.1
+    reacquire: bool = True
     backend: Backend = "fast"
 
     def __post_init__(self) -> None:
@@ -64,11 +83,16 @@ class OSCParams:
             raise ConfigError(f"backend: expected 'fast' or 'reference', got {self.backend!r}")
         if not (0.0 <= self.damping < 10.0):
             raise ConfigError(f"damping: expected 0 <= damping < 10, got {self.damping}")
+        if not (self.max_speed > 0.0):
+            raise ConfigError(f"max_speed: expected > 0 rad/s, got {self.max_speed}")
+        if not (self.max_error_m > 0.0):
+            raise ConfigError(f"max_error_m: expected > 0 m, got {self.max_error_m}")
 
     def gains(self, rate_hz: float) -> FloatArray:
         dt = 1.0 / (rate_hz * self.substeps)
         kp, kd = self.kappa / dt**2, 1.0 / dt
-        return np.array([kp, kd, kp, kd, self.posture_kp, self.posture_kd, self.damping])
+        row = [kp, kd, kp, kd, self.posture_kp, self.posture_kd, self.damping, self.max_speed]
+        return np.array([*row, self.max_error_m, float(self.reacquire)])
 
 
 @dataclass(frozen=True)
@@ -78,6 +102,8 @@ class ControlProblem:
     flat: rigid_fast.FlatModel
     level_ptr: np.ndarray
     level_markers: np.ndarray
+    dof_ptr: np.ndarray
+    dof_markers: np.ndarray
     lock_dof: np.ndarray
     lock_value: FloatArray
     lower: FloatArray
@@ -105,12 +131,16 @@ def control_problem(
                 raise ConfigError(f"level marker {n!r} is not tracked; tracked: {', '.join(names)}")
             members.append(index[n])
         ptr.append(len(members))
-    lock_dof = np.array([human.dof_index(c) + 1 for c in coordinate_tasks], dtype=np.int64)
-    lock_value = np.array([v for v, _ in coordinate_tasks.values()], dtype=float)
+    tasks, _ = resolve_coordinate_tasks(human, coordinate_tasks)
+    lock_dof = np.array([human.dof_index(c) + 1 for c in tasks], dtype=np.int64)
+    lock_value = np.array([v for v, _ in tasks.values()], dtype=float)
+    dof_ptr, dof_markers = dof_marker_table(human, names, {names[i] for i in members})
     return ControlProblem(
         rigid_fast.flatten(human.model, kin.frame_ids),
         np.array(ptr, dtype=np.int64),
         np.array(members, dtype=np.int64),
+        dof_ptr,
+        dof_markers,
         lock_dof,
         lock_value,
         np.asarray(human.model.lowerPositionLimit, dtype=float).copy(),
@@ -191,8 +221,8 @@ class DirectMarkerController:
         fm, pb = self.problem.flat, self.problem
         args = (
             self.q, self.v, x0, x1, xd, xdd, pb.row_weight, pb.level_ptr, pb.level_markers,
-            pb.lock_dof, pb.lock_value, pb.lower, pb.upper, pb.q_posture, self.gains, dt,
-            self.params.substeps,
+            pb.dof_ptr, pb.dof_markers, pb.lock_dof, pb.lock_value, pb.lower, pb.upper,
+            pb.q_posture, self.gains, dt, self.params.substeps,
         )  # fmt: skip
         if self._reference is not None:
             q, v, P, dq, err = self._reference.frame(*args)
@@ -270,8 +300,8 @@ def reconstruct_offline(
     Q, P, DQ, E = osc_trial(
         fm.parent, fm.R0, fm.p0, fm.axis, fm.mass, fm.com, fm.inertia, fm.gravity,
         fm.marker_joint, fm.marker_offset, q0, X, Xd, Xdd, pb.row_weight, pb.level_ptr,
-        pb.level_markers, pb.lock_dof, pb.lock_value, pb.lower, pb.upper,
-        pb.q_posture, p.gains(rate_hz), 1.0 / rate_hz, p.substeps,
+        pb.level_markers, pb.dof_ptr, pb.dof_markers, pb.lock_dof, pb.lock_value, pb.lower,
+        pb.upper, pb.q_posture, p.gains(rate_hz), 1.0 / rate_hz, p.substeps,
     )  # fmt: skip
     if not np.isfinite(Q).all():
         bad = int(np.flatnonzero(~np.isfinite(Q).all(axis=1))[0])

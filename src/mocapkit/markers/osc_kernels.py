@@ -8,9 +8,13 @@ Between two capture frames the simulation runs ``n_sub`` steps of dt; every step
 2. per marker the commanded acceleration ``F* = ẍ_d + Kd (ẋ_d − J v) + Kp (x_d − P)`` on
    the target trajectory ``x_{f-1} + ẋ s + ẍ s² / 2`` (central differences at t_{f-1},
    which reach x_f exactly at s = T);
-3. levels: first the locked coordinates and the joints at a limit (rows of the identity),
-   then the marker subsets in priority order (markers not visible dropped), then the
-   posture; Γ from :func:`mocapkit.markers.prioritized.prioritized_torque` (eq. 6-13);
+3. levels: first the held coordinates (rows of the identity): coordinate tasks, DOFs that
+   no visible tracked marker determines (held at their angle: nothing else should move
+   them, and the dynamically consistent inverse would otherwise swing them with every
+   acceleration of the body, into their limits), and joints at a limit that move or are
+   pushed outward (released as soon as the marker tasks pull them back in); then the
+   marker subsets in priority order (markers not visible dropped), then the posture;
+   Γ from :func:`mocapkit.markers.prioritized.prioritized_torque` (eq. 6-13);
 4. ``A q̈ + b + g = Γ`` integrated by semi-implicit Euler, angles kept within limits.
 
 Gains: with the model's own dynamics compensated, each task row is ẍ = F*; with
@@ -40,6 +44,21 @@ FloatArray = np.ndarray  # numba kernels: mypy does not track their dtypes
 
 
 @njit(cache=True)
+def determined_dofs(
+    tracked: np.ndarray, dof_ptr: np.ndarray, dof_markers: np.ndarray, n_dof: int
+) -> np.ndarray:
+    """(n_dof,) bool: a DOF is determined when some tracked marker at or below the segment it
+    moves is visible (``dof_markers[dof_ptr[k]:dof_ptr[k + 1]]``: marker columns)."""
+    out = np.zeros(n_dof, dtype=np.bool_)
+    for k in range(n_dof):
+        for i in range(dof_ptr[k], dof_ptr[k + 1]):
+            if tracked[dof_markers[i]]:
+                out[k] = True
+                break
+    return out
+
+
+@njit(cache=True)
 def _lock_rows(
     q: FloatArray,
     v: FloatArray,
@@ -47,14 +66,24 @@ def _lock_rows(
     lock_value: FloatArray,
     lower: FloatArray,
     upper: FloatArray,
-) -> tuple[np.ndarray, FloatArray]:
-    """q indices held this frame and their targets: coordinate tasks, then joints at limits."""
+    determined: np.ndarray,
+    push: FloatArray,
+) -> tuple[np.ndarray, FloatArray, np.ndarray]:
+    """q indices held this step, their targets and kinds (0: coordinate task, 1: held
+    because no visible marker determines it, 2: at a limit).
+
+    A DOF at a limit is held only while it moves outward or the marker tasks push it
+    outward (``push``: Jᵀ of the commanded marker accelerations, per velocity index, the
+    IK's projected-gradient rule); otherwise it is free to leave the limit. A DOF that no
+    visible marker determines keeps its angle (target = current value) until one does."""
     rows = np.empty(q.shape[0], dtype=np.int64)
     target = np.empty(q.shape[0])
+    kind = np.empty(q.shape[0], dtype=np.int64)
     n = 0
     for c in range(lock_dof.shape[0]):
         rows[n] = lock_dof[c]
         target[n] = lock_value[c]
+        kind[n] = 0
         n += 1
     for iq in range(7, q.shape[0]):
         held = False
@@ -63,15 +92,132 @@ def _lock_rows(
                 held = True
         if held:
             continue
-        if q[iq] <= lower[iq] + 1e-9 and v[iq - 1] <= 0.0:
+        iv = iq - 1
+        if not determined[iq - 7]:
+            rows[n] = iq
+            target[n] = q[iq]
+            kind[n] = 1
+            n += 1
+        elif q[iq] <= lower[iq] + 1e-9 and (v[iv] < 0.0 or (v[iv] == 0.0 and push[iv] <= 0.0)):
             rows[n] = iq
             target[n] = lower[iq]
+            kind[n] = 2
             n += 1
-        elif q[iq] >= upper[iq] - 1e-9 and v[iq - 1] >= 0.0:
+        elif q[iq] >= upper[iq] - 1e-9 and (v[iv] > 0.0 or (v[iv] == 0.0 and push[iv] >= 0.0)):
             rows[n] = iq
             target[n] = upper[iq]
+            kind[n] = 2
             n += 1
-    return rows[:n], target[:n]
+    return rows[:n], target[:n], kind[:n]
+
+
+@njit(cache=True)
+def _cap_speed(v: FloatArray, max_speed: float) -> None:
+    """In place: angular rates within ``max_speed`` [rad/s], the pelvis' linear velocity
+    within ``max_speed / 4`` [m/s] (direction kept)."""
+    lin = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    if lin > 0.25 * max_speed:
+        for c in range(3):
+            v[c] *= 0.25 * max_speed / lin
+    ang = np.sqrt(v[3] * v[3] + v[4] * v[4] + v[5] * v[5])
+    if ang > max_speed:
+        for c in range(3, 6):
+            v[c] *= max_speed / ang
+    for i in range(6, v.shape[0]):
+        v[i] = min(max(v[i], -max_speed), max_speed)
+
+
+@njit(cache=True)
+def reacquire(
+    parent: np.ndarray,
+    R0: FloatArray,
+    p0: FloatArray,
+    axis: FloatArray,
+    marker_joint: np.ndarray,
+    marker_offset: FloatArray,
+    q: FloatArray,
+    v: FloatArray,
+    x0: FloatArray,
+    x1: FloatArray,
+    row_weight: FloatArray,
+    level_markers: np.ndarray,
+    dof_ptr: np.ndarray,
+    dof_markers: np.ndarray,
+    lock_dof: np.ndarray,
+    lower: FloatArray,
+    upper: FloatArray,
+) -> int:
+    """In place on q, v: when tracked markers appear (visible at t_f, not at t_{f-1}), fit
+    the pelvis and the DOFs that carry them (the chain from the pelvis to their segments,
+    coordinate tasks excepted) to all visible tracked markers at t_f by damped
+    Gauss-Newton; those DOFs restart at rest. Returns how many DOFs were fitted.
+
+    Through a gap the simulation holds the DOFs no marker determines and leaves the
+    directions no visible marker sees where they were (the pelvis with two markers in
+    view, the head's roll about its one marker); a marker appearing far from the model
+    would then be chased over many frames (walking2: a head marker 240 mm off took 25
+    frames). The fit is IK of the visible markers over those DOFs alone; the rest of the
+    state is untouched, so markers already tracked are refitted where they are."""
+    M = marker_joint.shape[0]
+    nv = v.shape[0]
+    n_dof = nv - 6
+    appeared = np.zeros(M, dtype=np.bool_)
+    vis1 = np.zeros(M, dtype=np.bool_)
+    any_new = False
+    for k in range(level_markers.shape[0]):
+        m = level_markers[k]
+        vis1[m] = np.isfinite(x1[m, 0])
+        appeared[m] = vis1[m] and not np.isfinite(x0[m, 0])
+        any_new = any_new or appeared[m]
+    if not any_new:
+        return 0
+    cols = np.empty(nv, dtype=np.int64)
+    for c in range(6):
+        cols[c] = c
+    n = 6
+    for k in range(n_dof):
+        held = False
+        for c in range(lock_dof.shape[0]):
+            if lock_dof[c] == 7 + k:
+                held = True
+        carries = False
+        for i in range(dof_ptr[k], dof_ptr[k + 1]):
+            if appeared[dof_markers[i]]:
+                carries = True
+        if carries and not held:
+            cols[n] = 6 + k
+            n += 1
+    cols = cols[:n]
+    for _it in range(20):
+        R, t, S = forward_kinematics(parent, R0, p0, axis, q)
+        P, J = marker_kinematics(parent, R, t, S, marker_joint, marker_offset)
+        H = np.zeros((n, n))
+        g = np.zeros(n)
+        for m in range(M):
+            if not vis1[m]:
+                continue
+            Jc = J[m][:, cols]
+            e = x1[m] - P[m]
+            H += row_weight[m] * (Jc.T @ Jc)
+            g += row_weight[m] * (Jc.T @ e)
+        mu = 1e-6 * max(np.trace(H) / n, 1e-12)
+        for c in range(n):
+            H[c, c] += 1e-3 * H[c, c] + mu  # Marquardt: unseen directions stay put
+        step = np.linalg.solve(H, g)
+        big = np.abs(step).max()
+        if big > 0.5:  # keep each iteration within the linearisation's reach [rad, m]
+            step *= 0.5 / big
+        dv = np.zeros(nv)
+        for c in range(n):
+            dv[cols[c]] = step[c]
+        q[:] = integrate(q, dv)
+        for iq in range(7, q.shape[0]):
+            q[iq] = min(max(q[iq], lower[iq]), upper[iq])
+        if big < 1e-9:
+            break
+    for c in range(6, n):
+        v[cols[c]] = 0.0
+    return n - 6
 
 
 @njit(cache=True)
@@ -95,6 +241,8 @@ def osc_frame(
     row_weight: FloatArray,
     level_ptr: np.ndarray,
     level_markers: np.ndarray,
+    dof_ptr: np.ndarray,
+    dof_markers: np.ndarray,
     lock_dof: np.ndarray,
     lock_value: FloatArray,
     lower: FloatArray,
@@ -113,19 +261,31 @@ def osc_frame(
             target follows ``x0 + xd0 s + xdd0 s² / 2`` (s = time since t_{f-1}).
         row_weight: (M,) weight of each marker within its level (rows scaled by √w).
         level_ptr, level_markers: priority levels of marker indices (CSR layout).
+        dof_ptr, dof_markers: per revolute DOF, the level markers at or below the segment it
+            moves (CSR); a DOF none of whose markers is visible this frame is held.
         lock_dof, lock_value: q indices held at values (coordinate tasks).
         lower, upper: (nq,) limits (root entries infinite).
         q_posture: (nq,) posture target.
-        gains: [kp, kd, kp_lock, kd_lock, kp_posture, kd_posture, damping] per substep.
+        gains: [kp, kd, kp_lock, kd_lock, kp_posture, kd_posture, damping, max_speed,
+            max_error_m, reacquire] (see :class:`~mocapkit.markers.osc.OSCParams`).
 
     Returns:
-        q, v at t_f; P (M, 3) tracked markers; Δq (nv,) the bound of eq. 15; e (M,) marker
-        error norms to x1 (NaN: not visible at t_f). All NaN if the simulation diverged.
+        q, v at t_f; P (M, 3) tracked markers; Δq (nv,) the bound of eq. 15 (zero on held
+        DOFs); e (M,) marker error norms to x1 (NaN: not visible at t_f). All NaN if the
+        simulation diverged.
     """
     nv = v.shape[0]
     M = marker_joint.shape[0]
     kp, kd, kpl, kdl, kpp, kdp = gains[0], gains[1], gains[2], gains[3], gains[4], gains[5]
+    e_max = gains[8]
     dt = dt_frame / n_sub
+    q = q.copy()
+    v = v.copy()
+    if gains[9] > 0.0:
+        reacquire(
+            parent, R0, p0, axis, marker_joint, marker_offset, q, v, x0, x1, row_weight,
+            level_markers, dof_ptr, dof_markers, lock_dof, lower, upper,
+        )  # fmt: skip
     tracked = np.zeros(M, dtype=np.bool_)
     for m in range(M):
         tracked[m] = np.isfinite(x0[m, 0]) or np.isfinite(x1[m, 0])
@@ -133,8 +293,14 @@ def osc_frame(
     for k in range(level_markers.shape[0]):
         if tracked[level_markers[k]]:
             n_marker_rows += 3
+    determined = determined_dofs(tracked, dof_ptr, dof_markers, nv - 6)
     n_levels = level_ptr.shape[0] - 1
     dq = np.zeros(nv)
+    Jm = np.zeros((n_marker_rows, nv))
+    accm = np.zeros(n_marker_rows)
+    biasm = np.zeros(n_marker_rows)
+    dxm = np.zeros(n_marker_rows)
+    mptr = np.zeros(n_levels + 1, dtype=np.int64)
     for j in range(n_sub):
         s_now = j * dt
         R, t, S, V, Ab, Amat, h = dynamics_terms(
@@ -146,20 +312,7 @@ def osc_frame(
             nan = np.full(M, np.nan)
             return q * np.nan, v * np.nan, np.full((M, 3), np.nan), np.full(nv, np.nan), nan
         LA = np.linalg.cholesky(Amat)
-        lock_rows, lock_target = _lock_rows(q, v, lock_dof, lock_value, lower, upper)
-        n_lock = lock_rows.shape[0]
-        n_rows = n_lock + n_marker_rows
-        Jall = np.zeros((n_rows, nv))
-        acc = np.zeros(n_rows)
-        bias = np.zeros(n_rows)
-        dx = np.zeros(n_rows)
-        ptr = np.zeros(n_levels + 2, dtype=np.int64)
-        for c in range(n_lock):
-            iq = lock_rows[c]
-            Jall[c, iq - 1] = 1.0
-            acc[c] = kpl * (lock_target[c] - q[iq]) - kdl * v[iq - 1]
-        ptr[1] = n_lock
-        r = n_lock
+        r = 0
         for lv in range(n_levels):
             for k in range(level_ptr[lv], level_ptr[lv + 1]):
                 m = level_markers[k]
@@ -174,21 +327,47 @@ def osc_frame(
                     xdes, vdes, ades = x1[m], np.zeros(3), np.zeros(3)
                 Jv = J[m] @ v
                 sw = np.sqrt(row_weight[m])
+                e = xdes - P[m]
+                en = np.sqrt(e @ e)
+                sat = 1.0 if en <= e_max else e_max / en  # a far marker: reached gradually
                 for c in range(3):
-                    Jall[r + c] = sw * J[m, c]
-                    acc[r + c] = sw * (ades[c] + kd * (vdes[c] - Jv[c]) + kp * (xdes[c] - P[m, c]))
-                    bias[r + c] = sw * B[m, c]
-                    dx[r + c] = sw * (xdes[c] - P[m, c])
+                    Jm[r + c] = sw * J[m, c]
+                    accm[r + c] = sw * (ades[c] + kd * (vdes[c] - Jv[c]) + kp * sat * e[c])
+                    biasm[r + c] = sw * B[m, c]
+                    dxm[r + c] = sw * e[c]
                 r += 3
-            ptr[lv + 2] = r
+            mptr[lv + 1] = r
+        push = Jm.T @ (accm - biasm)
+        lock_rows, lock_target, _kind = _lock_rows(
+            q, v, lock_dof, lock_value, lower, upper, determined, push
+        )
+        n_lock = lock_rows.shape[0]
+        n_rows = n_lock + n_marker_rows
+        Jall = np.zeros((n_rows, nv))
+        acc = np.zeros(n_rows)
+        bias = np.zeros(n_rows)
+        dx = np.zeros(n_rows)
+        ptr = np.zeros(n_levels + 2, dtype=np.int64)
+        for c in range(n_lock):
+            iq = lock_rows[c]
+            Jall[c, iq - 1] = 1.0
+            acc[c] = kpl * (lock_target[c] - q[iq]) - kdl * v[iq - 1]
+        Jall[n_lock:] = Jm
+        acc[n_lock:] = accm
+        bias[n_lock:] = biasm
+        dx[n_lock:] = dxm
+        ptr[1] = n_lock
+        for lv in range(n_levels):
+            ptr[lv + 2] = n_lock + mptr[lv + 1]
         a_post = -kdp * v
         for iq in range(7, q.shape[0]):
             a_post[iq - 1] += kpp * (q_posture[iq] - q[iq])
         # the bound (eq. 15) of the last step's marker errors; lock rows have no error
         _Gamma, qdd, dq = prioritized_torque(
-            Amat, LA, h, Jall, acc, bias, ptr, a_post, dx, j == n_sub - 1, gains[6]
+            Amat, LA, h, Jall, acc, bias, ptr, a_post, dx, j == n_sub - 1, gains[6], True
         )
         v = v + qdd * dt
+        _cap_speed(v, gains[7])
         q = integrate(q, v * dt)
         for iq in range(7, q.shape[0]):
             if q[iq] < lower[iq]:
@@ -229,6 +408,8 @@ def osc_trial(
     row_weight: FloatArray,
     level_ptr: np.ndarray,
     level_markers: np.ndarray,
+    dof_ptr: np.ndarray,
+    dof_markers: np.ndarray,
     lock_dof: np.ndarray,
     lock_value: FloatArray,
     lower: FloatArray,
@@ -258,8 +439,8 @@ def osc_trial(
             x0, xd0, xdd0 = X[f - 1], Xd[f - 1], Xdd[f - 1]
         q, v, Pf, dq, e = osc_frame(
             parent, R0, p0, axis, mass, com, inertia, gravity, marker_joint, marker_offset,
-            q, v, x0, X[f], xd0, xdd0, row_weight, level_ptr, level_markers, lock_dof,
-            lock_value, lower, upper, q_posture, gains, dt_frame, n_sub,
+            q, v, x0, X[f], xd0, xdd0, row_weight, level_ptr, level_markers, dof_ptr,
+            dof_markers, lock_dof, lock_value, lower, upper, q_posture, gains, dt_frame, n_sub,
         )  # fmt: skip
         Q[f] = q
         P[f] = Pf

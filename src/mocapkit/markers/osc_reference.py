@@ -31,6 +31,7 @@ def prioritized_torque_reference(
     level_ptr: Sequence[int],
     posture_acc: FloatArray,
     damping: float,
+    exact_first: bool = False,
 ) -> tuple[FloatArray, FloatArray]:
     """Γ (eq. 11) and Jbar_⊗ (nv, R) with the damped task-space inertia of each level
     ``Λ = (J_k|p A⁻¹ J_k|pᵀ + λ² I)⁻¹`` and exact null-space projectors (see
@@ -40,14 +41,15 @@ def prioritized_torque_reference(
     N = np.eye(nv)
     Gamma = np.zeros(nv)
     Jbar_all = np.zeros((nv, J.shape[0]))
-    levels = [(level_ptr[k], level_ptr[k + 1]) for k in range(len(level_ptr) - 1)]
-    levels = [(a, b) for a, b in levels if b > a]
-    for i, (a, b) in enumerate(levels):
+    levels = [(k, level_ptr[k], level_ptr[k + 1]) for k in range(len(level_ptr) - 1)]
+    levels = [(k, a, b) for k, a, b in levels if b > a]
+    for i, (k0, a, b) in enumerate(levels):
         Jk = J[a:b]
         scale = float(np.trace(Jk @ Ainv @ Jk.T))
         if scale <= 0:
             continue
-        lam2 = damping * scale / (b - a) + 1e-10 * scale
+        lam2 = 0.0 if exact_first and k0 == 0 else damping * scale / (b - a)
+        lam2 += 1e-10 * scale
         Jp = Jk @ N
         X = Jp @ Ainv @ Jp.T
         w, U = np.linalg.eigh(X)
@@ -81,20 +83,68 @@ class ReferenceStepper:
         self.model = human.model
         self.data = self.model.createData()
 
+    @staticmethod
     def _lock_rows(
-        self, q: FloatArray, v: FloatArray, lock_dof: Any, lock_value: Any, lo: Any, hi: Any
-    ) -> tuple[list[int], list[float]]:
+        q: FloatArray, v: FloatArray, lock_dof: Any, lock_value: Any, lo: Any, hi: Any,
+        determined: np.ndarray, push: FloatArray,
+    ) -> tuple[list[int], list[float]]:  # fmt: skip
+        """Held q indices and targets: coordinate tasks, undetermined DOFs (at their angle),
+        joints at a limit that move or are pushed outward (see the kernel's ``_lock_rows``)."""
         rows, target = list(map(int, lock_dof)), list(map(float, lock_value))
         for iq in range(7, q.shape[0]):
             if iq in rows:
                 continue
-            if q[iq] <= lo[iq] + 1e-9 and v[iq - 1] <= 0.0:
+            iv = iq - 1
+            if not determined[iq - 7]:
+                rows.append(iq)
+                target.append(float(q[iq]))
+            elif q[iq] <= lo[iq] + 1e-9 and (v[iv] < 0 or (v[iv] == 0 and push[iv] <= 0)):
                 rows.append(iq)
                 target.append(float(lo[iq]))
-            elif q[iq] >= hi[iq] - 1e-9 and v[iq - 1] >= 0.0:
+            elif q[iq] >= hi[iq] - 1e-9 and (v[iv] > 0 or (v[iv] == 0 and push[iv] >= 0)):
                 rows.append(iq)
                 target.append(float(hi[iq]))
         return rows, target
+
+    def _reacquire(
+        self, q: FloatArray, v: FloatArray, x0: FloatArray, x1: FloatArray,
+        row_weight: FloatArray, level_markers: Any, dof_ptr: Any, dof_markers: Any,
+        lock_dof: Any, lower: FloatArray, upper: FloatArray,
+    ) -> FloatArray:  # fmt: skip
+        """q after fitting the pelvis and the DOFs carrying newly visible markers; v in
+        place (the kernel's ``reacquire``)."""
+        level = np.zeros(len(x1), dtype=bool)
+        level[np.asarray(level_markers, dtype=int)] = True
+        vis1 = level & np.isfinite(x1[:, 0])
+        appeared = vis1 & ~np.isfinite(x0[:, 0])
+        if not appeared.any():
+            return q
+        n_dof = len(v) - 6
+        carries = np.array(
+            [appeared[dof_markers[dof_ptr[k] : dof_ptr[k + 1]]].any() for k in range(n_dof)]
+        )
+        carries[[int(i) - 7 for i in lock_dof]] = False
+        cols = np.concatenate([np.arange(6), 6 + np.flatnonzero(carries)])
+        w = row_weight[vis1]
+        for _ in range(20):
+            P, J = self.kin.reference_positions_jacobians(q)
+            Jc = J[vis1][:, :, cols]  # (m, 3, n)
+            H = np.einsum("m,mci,mcj->ij", w, Jc, Jc)
+            g = np.einsum("m,mci,mc->i", w, Jc, x1[vis1] - P[vis1])
+            mu = 1e-6 * max(float(np.trace(H)) / cols.size, 1e-12)
+            H[np.diag_indices_from(H)] += 1e-3 * np.diag(H) + mu
+            step = np.linalg.solve(H, g)
+            big = float(np.abs(step).max())
+            if big > 0.5:
+                step *= 0.5 / big
+            dv = np.zeros(len(v))
+            dv[cols] = step
+            q = np.asarray(self._pin.integrate(self.model, q, dv))
+            q[7:] = np.clip(q[7:], lower[7:], upper[7:])
+            if big < 1e-9:
+                break
+        v[cols[6:]] = 0.0
+        return q
 
     def frame(
         self,
@@ -107,6 +157,8 @@ class ReferenceStepper:
         row_weight: FloatArray,
         level_ptr: Any,
         level_markers: Any,
+        dof_ptr: Any,
+        dof_markers: Any,
         lock_dof: Any,
         lock_value: Any,
         lower: FloatArray,
@@ -117,12 +169,17 @@ class ReferenceStepper:
         n_sub: int,
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
         pin, model, data = self._pin, self.model, self.data
-        kp, kd, kpl, kdl, kpp, kdp, damping = (float(g) for g in gains)
+        kp, kd, kpl, kdl, kpp, kdp, damping, max_speed, e_max, reacq = (float(g) for g in gains)
         nv, M = model.nv, len(x1)
         dt = dt_frame / n_sub
         tracked = np.isfinite(x0[:, 0]) | np.isfinite(x1[:, 0])
-        order = [int(m) for m in level_markers if tracked[m]]
+        determined = np.array(
+            [tracked[dof_markers[dof_ptr[k] : dof_ptr[k + 1]]].any() for k in range(nv - 6)]
+        )
         q, v = q.copy(), v.copy()
+        if reacq > 0.0:
+            q = self._reacquire(q, v, x0, x1, row_weight, level_markers, dof_ptr, dof_markers,
+                                lock_dof, lower, upper)  # fmt: skip
         dq = np.zeros(nv)
         for j in range(n_sub):
             s = j * dt
@@ -130,14 +187,11 @@ class ReferenceStepper:
             h = pin.nonLinearEffects(model, data, q, v).copy()
             P, J = self.kin.reference_positions_jacobians(q)
             B = self.kin.reference_bias(q, v)
-            rows, target = self._lock_rows(q, v, lock_dof, lock_value, lower, upper)
-            J_rows, acc, bias, ptr, dx = [], [], [], [0, len(rows)], []
-            for iq, tgt in zip(rows, target, strict=True):
-                e = np.zeros(nv)
-                e[iq - 1] = 1.0
-                J_rows.append(e)
-                acc.append(kpl * (tgt - q[iq]) - kdl * v[iq - 1])
-                bias.append(0.0)
+            Jm: list[FloatArray] = []
+            accm: list[float] = []
+            biasm: list[float] = []
+            dx: list[float] = []
+            mptr = []
             for lv in range(len(level_ptr) - 1):
                 for k in range(level_ptr[lv], level_ptr[lv + 1]):
                     m = int(level_markers[k])
@@ -149,22 +203,41 @@ class ReferenceStepper:
                     else:
                         xdes, vdes, ades = x1[m], np.zeros(3), np.zeros(3)
                     sw = np.sqrt(row_weight[m])
-                    a_task = ades + kd * (vdes - J[m] @ v) + kp * (xdes - P[m])
-                    J_rows += list(sw * J[m])
-                    acc += list(sw * a_task)
-                    bias += list(sw * B[m])
+                    e = xdes - P[m]
+                    sat = min(1.0, e_max / max(float(np.linalg.norm(e)), 1e-300))
+                    a_task = ades + kd * (vdes - J[m] @ v) + kp * sat * e
+                    Jm += list(sw * J[m])
+                    accm += list(sw * a_task)
+                    biasm += list(sw * B[m])
                     dx += list(sw * (xdes - P[m]))
-                ptr.append(len(acc))
+                mptr.append(len(accm))
+            Jmat = np.array(Jm).reshape(-1, nv)
+            push = Jmat.T @ (np.array(accm) - np.array(biasm)) if accm else np.zeros(nv)
+            rows, target = self._lock_rows(
+                q, v, lock_dof, lock_value, lower, upper, determined, push
+            )
+            lock_J = np.zeros((len(rows), nv))
+            lock_acc = []
+            for c, (iq, tgt) in enumerate(zip(rows, target, strict=True)):
+                lock_J[c, iq - 1] = 1.0
+                lock_acc.append(kpl * (tgt - q[iq]) - kdl * v[iq - 1])
+            ptr = [0, len(rows), *(len(rows) + p for p in mptr)]
             a_post = -kdp * v
             a_post[6:] += kpp * (q_posture[7:] - q[7:])
             Gamma, Jbar = prioritized_torque_reference(
-                Amat, h, np.array(J_rows).reshape(-1, nv), np.array(acc), np.array(bias),
-                ptr, a_post, damping,
+                Amat, h, np.vstack([lock_J, Jmat]), np.array(lock_acc + accm),
+                np.array([0.0] * len(rows) + biasm), ptr, a_post, damping, True,
             )  # fmt: skip
             if dx:
                 dq = Jbar[:, len(rows) :] @ np.array(dx)  # eq. 15, the last step's errors
             qdd = np.linalg.solve(Amat, Gamma - h)
             v = v + qdd * dt
+            lin, ang = np.linalg.norm(v[:3]), np.linalg.norm(v[3:6])
+            if lin > 0.25 * max_speed:
+                v[:3] *= 0.25 * max_speed / lin
+            if ang > max_speed:
+                v[3:6] *= max_speed / ang
+            v[6:] = np.clip(v[6:], -max_speed, max_speed)
             q = np.asarray(pin.integrate(model, q, v * dt))
             low, high = q[7:] < lower[7:], q[7:] > upper[7:]
             q[7:] = np.clip(q[7:], lower[7:], upper[7:])
@@ -174,5 +247,4 @@ class ReferenceStepper:
         err = np.full(M, np.nan)
         vis = np.isfinite(x1[:, 0])
         err[vis] = np.linalg.norm(x1[vis] - P[vis], axis=1)
-        del order
         return q, v, P, dq, err

@@ -74,6 +74,7 @@ def prioritized_torque(
     dx: FloatArray,
     want_bound: bool,
     damping: float,
+    exact_first: bool = False,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Γ (nv,), the resulting q̈ = A⁻¹ (Γ − b − g) (nv,) and, if ``want_bound``, the joint-error
     bound Δq = Jbar_⊗ Δx_⊗ (eq. 15) for the row errors ``dx`` (R,), where Jbar_⊗ is the
@@ -112,6 +113,9 @@ def prioritized_torque(
         dx: (R,) row errors for the bound (ignored unless ``want_bound``).
         want_bound: compute the bound.
         damping: relative damping of the least squares within a level (DEFAULT_DAMPING).
+        exact_first: solve the first level without damping (held coordinates: rows of the
+            identity, never ill-conditioned; damped, a held DOF would creep by 1 % of its
+            free acceleration every step).
     """
     nv = Amat.shape[0]
     LAi = np.linalg.inv(LA)  # one BLAS-friendly inverse instead of many substitutions
@@ -137,7 +141,7 @@ def prioritized_torque(
                 scale += Bk[i, c] * Bk[i, c]
         if scale <= 0.0:
             continue
-        lam2 = damping * scale / r + 1e-10 * scale
+        lam2 = (0.0 if exact_first and k == 0 else damping * scale / r) + 1e-10 * scale
         if W.shape[1] == 0:
             C = Bk
         else:

@@ -22,11 +22,14 @@ from mocapkit.body.markersets import MarkerSet, guess_markerset, load_markerset
 from mocapkit.body.scaling import Subject, scale_from_static
 from mocapkit.errors import ConfigError, DataError
 from mocapkit.markers import conventions
+from mocapkit.markers.bounds import joint_error_bounds
 from mocapkit.markers.cleaning import CleaningReport, fill_gaps, lowpass
+from mocapkit.markers.coordinates import resolve_coordinate_tasks
+from mocapkit.markers.determined import dof_determined
 from mocapkit.markers.grouping import make_levels
 from mocapkit.markers.ik import IKParams, initial_root_pose, solve_ik
 from mocapkit.markers.osc import DirectMarkerController, OSCParams, reconstruct_offline
-from mocapkit.markers.result import ReconstructionResult, joint_error_bounds
+from mocapkit.markers.result import ReconstructionResult
 from mocapkit.markers.trajectories import MarkerTrajectories
 
 log = logging.getLogger(__name__)
@@ -177,11 +180,19 @@ def prepare(
 def estimate_height(traj: MarkerTrajectories) -> float:
     """Stature [m] ~ median vertical extent of the markers (z-up): the head markers sit about
     a marker radius above the vertex, the foot markers about as far above the floor."""
-    with np.errstate(invalid="ignore"):
-        z = traj.positions[..., 2]
-        extent = np.nanmax(z, axis=1) - np.nanmin(z, axis=1)
-    h = float(np.nanmedian(extent))
     from mocapkit.body.anthropometry import HEIGHT_RANGE_M
+
+    z = traj.positions[..., 2]
+    seen = np.isfinite(z).sum(axis=1) >= 2  # frames with a vertical extent at all
+    if not seen.any():
+        raise DataError(
+            "cannot estimate the stature: no frame shows two markers at once; pass --height-m"
+        )
+    zs = z[seen]
+    extent = np.max(np.where(np.isfinite(zs), zs, -np.inf), axis=1) - np.min(
+        np.where(np.isfinite(zs), zs, np.inf), axis=1
+    )
+    h = float(np.median(extent))
 
     if not (HEIGHT_RANGE_M[0] <= h <= HEIGHT_RANGE_M[1]):
         raise DataError(
@@ -290,6 +301,9 @@ def reconstruct(
     """Joint angles for a prepared trial (metres, z-up, set names)."""
     warn = _Warnings(warnings or [])
     human, ms = subject.human, subject.markerset
+    tasks, notes = resolve_coordinate_tasks(human, ms.coordinate_tasks)
+    for note in notes:
+        log.info("%s", note)
     names = [n for n in trial.names if n in human.markers]
     unregistered = set(subject.report.get("unregistered_markers", ()))
     X = np.ascontiguousarray(trial.select(names).positions)
@@ -315,17 +329,19 @@ def reconstruct(
     t0 = time.perf_counter()
     if options.method == "ik":
         sol = solve_ik(
-            human, names, X, weights, q_init, ms.coordinate_tasks, q_posture=human.neutral(),
+            human, names, X, weights, q_init, tasks, q_posture=human.neutral(),
             params=options.ik,
         )  # fmt: skip
         elapsed = time.perf_counter() - t0
         Q = sol.q
-        dq = joint_error_bounds(human, names, Q, X, weights, list(ms.coordinate_tasks))
+        tracked_w = np.where([n in set(tracked) for n in names], weights, 0.0)
+        _, det = dof_determined(human, names, tracked, X, held=tasks)
+        dq = joint_error_bounds(human, names, Q, X, tracked_w, ~det, list(tasks))
     else:
         wmap = dict(zip(names, weights, strict=True))
         if options.mode == "online":
             ctrl = DirectMarkerController(
-                human, names, levels, ms.coordinate_tasks, q_init, rate, human.neutral(),
+                human, names, levels, tasks, q_init, rate, human.neutral(),
                 options.osc, wmap,
             )  # fmt: skip
             frames = [ctrl.step(x) for x in X]
@@ -334,13 +350,13 @@ def reconstruct(
             dq = np.array([f.dq for f in frames])
         else:
             Q, _, dq, _ = reconstruct_offline(
-                human, names, X, rate, levels, ms.coordinate_tasks, q_init, human.neutral(),
+                human, names, X, rate, levels, tasks, q_init, human.neutral(),
                 options.osc, wmap,
             )  # fmt: skip
             elapsed = time.perf_counter() - t0
     result = ReconstructionResult.build(
         trial.time, human, names, tracked, X, Q, dq, elapsed, options.method, options.mode,
-        [list(level) for level in levels], ms.coordinate_tasks, warn,
+        [list(level) for level in levels], tasks, warn, weights,
     )  # fmt: skip
     if unregistered & set(tracked):
         warn.add(
@@ -351,6 +367,44 @@ def reconstruct(
     return result
 
 
+def apply_ik_setup(
+    ms: MarkerSet, options: ReconstructionOptions, setup_path: str | Path, warnings: _Warnings
+) -> tuple[MarkerSet, ReconstructionOptions]:
+    """An OpenSim IK setup's marker weights and coordinate tasks on the marker set, its time
+    range on the options (unless they set one). Markers the setup does not name keep the
+    set's weights (said in a warning); markers it names that the set lacks are a warning."""
+    import dataclasses
+
+    from mocapkit.io.opensim_ik_setup import read_ik_setup
+
+    setup = read_ik_setup(setup_path)
+    names = set(ms.names)
+    unknown = [n for n in setup.marker_weights if n not in names]
+    if unknown:
+        warnings.add(
+            f"{setup_path}: markers {', '.join(unknown[:10])} are not in marker set "
+            f"{ms.name!r}; their IK weights are ignored (add them to a YAML marker set)"
+        )
+    unnamed = [n for n in ms.names if n not in setup.marker_weights]
+    if unnamed:
+        warnings.add(
+            f"{setup_path}: names no IK task for markers {', '.join(unnamed[:10])}"
+            f"{' ...' if len(unnamed) > 10 else ''}; they keep marker set {ms.name!r}'s weights"
+        )
+    markers = tuple(
+        dataclasses.replace(m, weight=setup.marker_weights.get(m.name, m.weight))
+        for m in ms.markers
+    )
+    ms = dataclasses.replace(ms, markers=markers, coordinate_tasks=dict(setup.coordinate_tasks))
+    if setup.time_range is not None and options.start_s is None and options.end_s is None:
+        options = dataclasses.replace(
+            options, start_s=setup.time_range[0], end_s=setup.time_range[1]
+        )
+    if setup.ignored:
+        log.info("%s: settings without effect here: %s", setup_path, ", ".join(setup.ignored))
+    return ms, options
+
+
 def run(
     trial_path: str | Path,
     static_path: str | Path | None,
@@ -359,11 +413,13 @@ def run(
     mass_kg: float | None,
     options: ReconstructionOptions | None = None,
     sex: Sex = "male",
+    ik_setup: str | Path | None = None,
 ) -> tuple[ReconstructionResult, Subject, CleaningReport]:
     """Files to joint angles: load, check, clean, calibrate, reconstruct.
 
     ``height_m`` None: estimated from the static trial (vertical extent of its markers);
     ``mass_kg`` None: 75 kg (only the simulated dynamics depend on it, not the angles of IK).
+    ``ik_setup``: an OpenSim IK setup XML (:func:`apply_ik_setup`).
     """
     opts = options or ReconstructionOptions()
     warn = _Warnings()
@@ -374,6 +430,8 @@ def run(
         log.info("marker set %s matches %d of the trial's labels", ms.name, len(match.index))
     else:
         ms = load_markerset(markerset)
+    if ik_setup is not None:
+        ms, opts = apply_ik_setup(ms, opts, ik_setup, warn)
     trial, static, cleaning = prepare(trial, static, ms, opts, warn)
     if static is not None:
         check_static_matches(static, trial, ms, warn)
@@ -392,6 +450,7 @@ def run(
             "scaling": subject.report.get("segment_scales", {}),
             "source": str(trial_path),
             "static": None if static_path is None else str(static_path),
+            "ik_setup": None if ik_setup is None else str(ik_setup),
         }
     )
     return result, subject, cleaning

@@ -2,8 +2,11 @@
 the paper's per-frame joint-error bounds (eq. 14-17), with writers for .mot, CSV and TRC.
 
 Coordinates that no visible marker determines (structurally: no tracked marker visible on
-the segment the DOF moves or below it, and no coordinate task holding it) are NaN in those
-frames; a column that is never determined is dropped from the files, with a warning.
+the segment the DOF moves or below it, and no coordinate task holding it; see
+:mod:`mocapkit.markers.determined`) are NaN in those frames; a column that is never
+determined is dropped from the files, with a warning. Frames without any visible tracked
+marker have no marker error and no bound: they are NaN in the per-frame series, left out
+of the figures' means and maxima, and counted in a warning.
 """
 
 from __future__ import annotations
@@ -18,81 +21,12 @@ import numpy as np
 
 from mocapkit._validate import FloatArray
 from mocapkit.body.human_model import HumanModel
-from mocapkit.markers.coordinates import angular_columns, coordinate_names, coordinates_from_q
+from mocapkit.markers.bounds import POORLY_DETERMINED_DEG_PER_MM, BoundReport, bound_report
+from mocapkit.markers.coordinates import coordinate_map, coordinates_and_gimbal
+from mocapkit.markers.determined import column_determined, dof_determined
 from mocapkit.markers.kinematics import MarkerKinematics
 
 log = logging.getLogger(__name__)
-
-
-def joint_error_bounds(
-    human: HumanModel,
-    names: Sequence[str],
-    Q: FloatArray,
-    X: FloatArray,
-    weights: FloatArray,
-    locked: Sequence[str] = (),
-) -> FloatArray:
-    """Eq. 15 for IK solutions: Δq = A⁻¹ Jᵀ (J A⁻¹ Jᵀ)⁺ Δx per frame (J: the weighted marker
-    rows at the solution, Δx their residuals, below the locked coordinates as for direct
-    marker control), computed with the same kernel as the OSC's."""
-    from mocapkit.markers import rigid_fast
-    from mocapkit.markers.prioritized import DEFAULT_DAMPING, prioritized_torque
-
-    kin = MarkerKinematics(human, names)
-    fm = rigid_fast.flatten(human.model, kin.frame_ids)
-    sw = np.sqrt(np.maximum(weights, 0.0))
-    out = np.zeros((len(Q), human.nv))
-    lock_rows = np.zeros((len(locked), human.nv))
-    for i, name in enumerate(locked):
-        lock_rows[i, human.dof_index(name)] = 1.0
-    for f, q in enumerate(Q):
-        R, t, S, _, _, A, h = rigid_fast.dynamics_terms(
-            fm.parent, fm.R0, fm.p0, fm.axis, fm.mass, fm.com, fm.inertia, fm.gravity, q,
-            np.zeros(human.nv),
-        )  # fmt: skip
-        P, J = rigid_fast.marker_kinematics(fm.parent, R, t, S, fm.marker_joint, fm.marker_offset)
-        vis = np.isfinite(X[f, :, 0]) & (weights > 0)
-        if not vis.any():
-            continue
-        Jm = (J[vis] * sw[vis, None, None]).reshape(-1, human.nv)
-        Jr = np.ascontiguousarray(np.vstack([lock_rows, Jm]))
-        dx = ((X[f, vis] - P[vis]) * sw[vis, None]).reshape(-1)
-        LA = np.linalg.cholesky(A)
-        zeros = np.zeros(len(Jr))
-        rows_dx = np.concatenate([np.zeros(len(lock_rows)), dx])
-        _, _, out[f] = prioritized_torque(
-            A, LA, h, Jr, zeros, zeros, np.array([0, len(lock_rows), len(Jr)]),
-            np.zeros(human.nv), rows_dx, True, DEFAULT_DAMPING,
-        )  # fmt: skip
-    return out
-
-
-def determined_mask(
-    human: HumanModel,
-    tracked: Sequence[str],
-    X: FloatArray,
-    names: Sequence[str],
-    locked: Mapping[str, Any],
-) -> FloatArray:
-    """(N, 6 + n_dof) bool: coordinate determined by some visible tracked marker."""
-    index = {n: i for i, n in enumerate(names)}
-    vis = np.isfinite(X[..., 0])
-    seg_markers: dict[str, list[int]] = {}
-    for n in tracked:
-        seg_markers.setdefault(human.markers[n][0], []).append(index[n])
-    n_frames = X.shape[0]
-    out = np.zeros((n_frames, 6 + len(human.dof_names)), dtype=bool)
-    all_tracked = [index[n] for n in tracked]
-    out[:, :6] = (vis[:, all_tracked].sum(axis=1) >= 3)[:, None]
-    dof_seg = human.dof_segment()
-    for k, dof in enumerate(human.dof_names):
-        if dof in locked:
-            out[:, 6 + k] = True
-            continue
-        cols = [i for seg in human.descendants(dof_seg[dof]) for i in seg_markers.get(seg, [])]
-        if cols:
-            out[:, 6 + k] = vis[:, cols].any(axis=1)
-    return out
 
 
 @dataclass
@@ -107,9 +41,13 @@ class ReconstructionResult:
         marker_names: the M markers of the trial; tracked: those the method used.
         commanded, tracked_positions: (N, M, 3) captured and model markers [m].
         errors: (N, M) distance [m] for visible markers, NaN otherwise.
-        dq: (N, nv) joint-error bound Δq = Jbar_⊗ Δx_⊗ (eq. 15) [rad; root translation m].
+        dq: (N, nv) joint-error bound Δq = Jbar_⊗ Δx_⊗ (eq. 15) of the model's DOFs [rad;
+            root translation m]: NaN where the DOF is not determined, capped at the joint's
+            range (:mod:`mocapkit.markers.bounds`); :attr:`coordinate_bound` is the same
+            for the reported coordinates, which the figures use.
         levels: the marker subsets in priority order.
         elapsed_s: wall time of the reconstruction loop.
+        bound: the bound's report (capped entries, conditioning per frame and DOF).
     """
 
     time: FloatArray
@@ -127,6 +65,7 @@ class ReconstructionResult:
     method: str
     mode: str
     angular: np.ndarray
+    bound: BoundReport | None = None
     warnings: list[str] = field(default_factory=list)
     meta: dict[str, Any] = field(default_factory=dict)
 
@@ -146,29 +85,34 @@ class ReconstructionResult:
         levels: list[list[str]],
         locked: Mapping[str, Any],
         warnings: list[str],
+        weights: FloatArray | None = None,
     ) -> ReconstructionResult:
+        """Errors, named coordinates (NaN where undetermined) and the bound's report;
+        ``weights`` (M,) of ``names`` (default 1) weigh the conditioning's fit."""
         P = np.array([MarkerKinematics(human, names).positions(q) for q in Q]).reshape(X.shape)
         errors = np.linalg.norm(P - X, axis=2)
-        coords = coordinates_from_q(human, Q)
-        det = determined_mask(human, tracked, X, names, locked)
+        cmap = coordinate_map(human)
+        coords, gimbal = coordinates_and_gimbal(human, Q, cmap)
+        root, dofs = dof_determined(human, names, tracked, X, held=locked)
+        det = column_determined(cmap, root, dofs)
+        w = np.ones(len(names)) if weights is None else np.asarray(weights, dtype=float)
+        in_fit = np.array([n in set(tracked) for n in names])
+        report = bound_report(
+            human, cmap, names, Q, X, np.where(in_fit, w, 0.0), dq, root, dofs,
+            held=list(locked), columns=det,
+        )  # fmt: skip
+        structural = det
+        det = det & ~report.unobserved
         coords = np.where(det, coords, np.nan)
-        cnames = coordinate_names(human)
-        never = [c for k, c in enumerate(cnames) if not det[:, k].any()]
-        if never:
-            warnings.append(
-                f"{len(never)} coordinates are not determined by any tracked marker and are left "
-                f"out of the outputs: {', '.join(never)}"
-            )
-            log.warning("%s", warnings[-1])
-        partial = [c for k, c in enumerate(cnames) if det[:, k].any() and not det[:, k].all()]
-        if partial:
-            warnings.append(
-                f"coordinates {', '.join(partial[:10])} are undetermined (NaN) in some frames "
-                "where their markers are missing"
-            )
-            log.warning("%s", warnings[-1])
+        t = np.asarray(time, dtype=float)
+        for msg in _coverage_warnings(
+            cmap.names, structural, det, gimbal, report, t, _no_visible_frames(X, names, tracked)
+        ):
+            warnings.append(msg)
+            log.warning("%s", msg)
+        cnames = cmap.names
         return cls(
-            time=np.asarray(time, dtype=float),
+            time=t,
             q=Q,
             coordinate_names=cnames,
             coordinates=coords,
@@ -177,12 +121,13 @@ class ReconstructionResult:
             commanded=X,
             tracked_positions=P,
             errors=errors,
-            dq=dq,
+            dq=report.dq,
             levels=levels,
             elapsed_s=elapsed_s,
             method=method,
             mode=mode,
-            angular=angular_columns(human),
+            angular=cmap.angular,
+            bound=report,
             warnings=warnings,
         )
 
@@ -195,30 +140,64 @@ class ReconstructionResult:
     def fps(self) -> float:
         return self.n_frames / self.elapsed_s if self.elapsed_s > 0 else float("inf")
 
-    def frame_rms(self, markers: Sequence[str] | None = None) -> FloatArray:
-        """(N,) RMS over each frame's visible markers (default: the tracked ones) [m]."""
+    def _errors_of(self, markers: Sequence[str] | None) -> FloatArray:
         names = self.tracked if markers is None else markers
-        idx = [self.marker_names.index(n) for n in names]
-        e = self.errors[:, idx]
-        with np.errstate(invalid="ignore"):
-            return np.sqrt(np.nanmean(e**2, axis=1))
+        return self.errors[:, [self.marker_names.index(n) for n in names]]
+
+    def visible_count(self, markers: Sequence[str] | None = None) -> np.ndarray:
+        """(N,) number of visible markers per frame (default: the tracked ones)."""
+        return np.isfinite(self._errors_of(markers)).sum(axis=1)
+
+    def frame_rms(self, markers: Sequence[str] | None = None) -> FloatArray:
+        """(N,) RMS over each frame's visible markers (default: the tracked ones) [m]; NaN in
+        frames where none of them is visible (counted in :attr:`warnings`)."""
+        e = self._errors_of(markers)
+        n = np.isfinite(e).sum(axis=1)
+        sq = np.where(np.isfinite(e), e**2, 0.0).sum(axis=1)
+        out = np.full(e.shape[0], np.nan)
+        out[n > 0] = np.sqrt(sq[n > 0] / n[n > 0])
+        return out
+
+    @property
+    def coordinate_bound(self) -> FloatArray:
+        """(N, K) the joint-error bound of the reported coordinates (eq. 15 through their
+        Jacobian; NaN where undetermined, capped) [rad; translations m]."""
+        if self.bound is None:
+            return np.full(self.coordinates.shape, np.nan)
+        return self.bound.dc
 
     def dq_extremes(self) -> tuple[FloatArray, FloatArray]:
-        """Per frame Δq_max and Δq_min over the rotational DOFs (eq. 17) [rad]."""
-        rot = self.dq[:, 3:]
-        return rot.max(axis=1), rot.min(axis=1)
+        """Per frame Δq_max and Δq_min over the determined rotational coordinates (eq. 17)
+        [rad]; NaN in frames where none is determined."""
+        rot = self.coordinate_bound[:, self.angular]
+        has = np.isfinite(rot).any(axis=1)
+        hi = np.full(rot.shape[0], np.nan)
+        lo = np.full(rot.shape[0], np.nan)
+        hi[has] = np.max(np.where(np.isfinite(rot[has]), rot[has], -np.inf), axis=1)
+        lo[has] = np.min(np.where(np.isfinite(rot[has]), rot[has], np.inf), axis=1)
+        return hi, lo
 
     def metrics(self, markers: Sequence[str] | None = None) -> dict[str, Any]:
-        """The figures of ``markers reconstruct --json``."""
+        """The figures of ``markers reconstruct --json``: means and maxima over the frames
+        where they exist (frames without a visible marker or a determined DOF are left out;
+        None if there is none at all)."""
         rms = self.frame_rms(markers)
-        names = self.tracked if markers is None else markers
-        idx = [self.marker_names.index(n) for n in names]
+        e = self._errors_of(markers)
+        seen = np.isfinite(rms)
+        bound = np.abs(self.coordinate_bound[:, self.angular])
+        has = np.isfinite(bound)
+
+        def rounded(x: float | None, digits: int) -> float | None:
+            return None if x is None else round(float(x), digits)
+
         return {
             "frames": self.n_frames,
             "fps": round(float(self.fps), 1),
-            "marker_rms_mm": round(float(np.nanmean(rms)) * 1000, 2),
-            "marker_max_mm": round(float(np.nanmax(self.errors[:, idx])) * 1000, 2),
-            "joint_error_bound_deg_max": round(float(np.degrees(np.abs(self.dq[:, 3:]).max())), 3),
+            "marker_rms_mm": rounded(rms[seen].mean() * 1000 if seen.any() else None, 2),
+            "marker_max_mm": rounded(e[np.isfinite(e)].max() * 1000 if seen.any() else None, 2),
+            "joint_error_bound_deg_max": rounded(
+                np.degrees(bound[has].max()) if has.any() else None, 3
+            ),
         }
 
     def column(self, name: str) -> FloatArray:
@@ -263,3 +242,75 @@ class ReconstructionResult:
             self.time, self.tracked_positions, self.marker_names, meta={"rate_hz": rate}
         )
         return write_trc(path, traj)
+
+
+def _no_visible_frames(X: FloatArray, names: Sequence[str], tracked: Sequence[str]) -> np.ndarray:
+    """(N,) frames where no tracked marker is visible."""
+    keep = set(tracked)
+    cols = [i for i, n in enumerate(names) if n in keep]
+    return np.asarray(~np.isfinite(X[:, cols, 0]).any(axis=1))
+
+
+def _coverage_warnings(
+    cnames: Sequence[str],
+    structural: np.ndarray,
+    det: np.ndarray,
+    gimbal: Mapping[str, np.ndarray],
+    report: BoundReport,
+    t: FloatArray,
+    blind: np.ndarray,
+) -> list[str]:
+    """What the outputs leave out or cannot vouch for, in words (see ReconstructionResult)."""
+    out = []
+    never = [c for k, c in enumerate(cnames) if not det[:, k].any()]
+    if never:
+        out.append(
+            f"{len(never)} coordinates are not determined by any tracked marker and are left "
+            f"out of the outputs: {', '.join(never)}"
+        )
+    partial = [c for k, c in enumerate(cnames) if det[:, k].any() and not det[:, k].all()]
+    if partial:
+        out.append(
+            f"coordinates {', '.join(partial[:10])}{' ...' if len(partial) > 10 else ''} are "
+            "undetermined (NaN) in some frames where their markers are missing"
+        )
+    unobserved = structural & report.unobserved
+    if unobserved.any():
+        counts = [(c, int(unobserved[:, k].sum())) for k, c in enumerate(cnames)]
+        worst = sorted((kv for kv in counts if kv[1]), key=lambda kv: -kv[1])[:8]
+        out.append(
+            "numerically undetermined, so NaN there (the visible markers leave a direction "
+            "of them unobserved, e.g. one marker for several DOFs): "
+            + ", ".join(f"{c} in {n} frames" for c, n in worst)
+        )
+    if blind.any():
+        idx = np.flatnonzero(blind)
+        out.append(
+            f"{idx.size} of {len(t)} frames have no visible tracked marker (first at "
+            f"t = {t[idx[0]]:.3f} s, last at t = {t[idx[-1]]:.3f} s): the pose is held there "
+            "and they have no marker error and no error bound (NaN in the per-frame series, "
+            "left out of marker_rms_mm and the other figures)"
+        )
+    for joint, close in gimbal.items():
+        n_close = int((close & det[:, list(cnames).index(joint)]).sum())
+        if n_close:
+            out.append(
+                f"{joint} within 10 deg of +-90 deg in {n_close} frames (gimbal lock of "
+                "OpenSim's rotation order): the other two angles of that joint are "
+                "ill-defined there (the model's own DOFs in q are not)"
+            )
+    n_capped = int(report.capped.any(axis=1).sum())
+    if n_capped:
+        out.append(
+            f"the joint-error bound (eq. 15) exceeded a joint's range in {n_capped} frames "
+            "and is capped at the range there (the linearisation is meaningless that far)"
+        )
+    if report.poorly_determined:
+        worst = sorted(report.poorly_determined.items(), key=lambda kv: -kv[1])[:6]
+        out.append(
+            "poorly determined by the visible markers (more than "
+            f"{POORLY_DETERMINED_DEG_PER_MM:g} deg per mm of marker error): "
+            + ", ".join(f"{d} in {n} frames" for d, n in worst)
+            + "; their joint-error bounds rest on an ill-conditioned fit"
+        )
+    return out
