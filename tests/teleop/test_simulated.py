@@ -81,7 +81,12 @@ def test_operator_commands_answer_refuse_with_the_reason_and_recover() -> None:
         until(span.engage_t)
         assert sim.engage() == "engage: aligning"
         deadline = time.monotonic() + 5.0
-        while sim.snapshot()["state"] != "engaged" and time.monotonic() < deadline:
+        # engaged, then the first command (the tick that engages may still answer the
+        # robot's gate with a hold: the command comes with the next one)
+        while time.monotonic() < deadline:
+            raw = sim.snapshot()
+            if raw["state"] == "engaged" and raw.get("ee_commanded") is not None:
+                break
             time.sleep(0.02)
         raw = sim.snapshot()
         snap = LiveSnapshot.from_mapping(raw)
