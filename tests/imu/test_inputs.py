@@ -4,6 +4,8 @@ test_filter_contract.py)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pytest
 
@@ -51,7 +53,9 @@ def test_clean_path_equals_the_checked_path(with_mag: bool, acc_range: float | N
         lambda g, a, m: g.__setitem__((9, 0), 40.0),  # saturated gyroscope: warns
     ],
 )
-def test_doubtful_batches_take_the_checked_path(spoil) -> None:  # type: ignore[no-untyped-def]
+def test_doubtful_batches_take_the_checked_path(
+    spoil: Callable[[np.ndarray, np.ndarray, np.ndarray], None],
+) -> None:
     gyr, acc, mag = _batch(2)
     spoil(gyr, acc, mag)
     assert _prepare_clean(gyr, acc, mag, None, 0.01, None, 40.0) is None
