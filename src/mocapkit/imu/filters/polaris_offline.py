@@ -161,6 +161,29 @@ def smooth(
         return _tail_fast(
             params, c, gyr, acc, mag, dt, dt_b, use_acc, use_mag, has_mag, aux_f, aux_b
         )
+    return _tail_numpy(
+        params, c, backend, gyr, acc, mag, dt, dt_b, use_acc, use_mag, has_mag, aux_f, aux_b
+    )
+
+
+def _tail_numpy(
+    params: PolarisParams,
+    c: FloatArray,
+    backend: str,
+    gyr: FloatArray,
+    acc: FloatArray,
+    mag: FloatArray,
+    dt: FloatArray,
+    dt_b: FloatArray,
+    use_acc: np.ndarray,
+    use_mag: np.ndarray,
+    has_mag: bool,
+    aux_f: FloatArray,
+    aux_b: FloatArray,
+) -> OfflineResult:
+    """(O3)-(O5) in numpy from the forward aux ``aux_f`` and the time-reversed backward
+    aux ``aux_b`` (N, 8) (the reference backend's path)."""
+    n = gyr.shape[0]
     aux_b = aux_b[::-1]
     # (O3) smoothed bias (the backward pass estimates -b).
     var_f = aux_f[:, 7:8]
