@@ -15,6 +15,8 @@ $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev,viz,robots]'
+	@echo "compiling the numba kernels once (about a minute on 2 cores)"
+	$(BIN)/mocapkit demo --warm-up
 	@touch $(STAMP)
 
 $(BENCH_STAMP): $(STAMP)

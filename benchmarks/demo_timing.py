@@ -91,6 +91,13 @@ def main(argv: list[str] | None = None) -> int:
         "IK, the robot server's and the sender's start; the wall time includes Python's and "
         "numba's start-up.",
         "",
+        "A run that finds numba's cache missing or stale (a fresh install, or sources edited "
+        "since) compiles the kernels first: about 75 s more on 2 cores (measured: run 1 "
+        "104.6 s, markers 75.5 s, after the marker kernels changed). `make setup` therefore "
+        "compiles them once with `mocapkit demo --warm-up` (4 tasks in 2 processes: 61-72 s "
+        "wall measured with one other job running), so `make demo` on a fresh machine runs "
+        "as a warm run does.",
+        "",
         f"Demo teleoperation figures of the last run (shape {t.get('shape')}, "
         f"{t.get('preset')}, filter {t.get('filter')} on the {t.get('fusion')}, "
         "consumer-grade IMU errors):",

@@ -15,6 +15,7 @@ examples:
   mocapkit demo                              # everything; prints the report's path
   mocapkit demo --out /tmp/demo --shape circle
   mocapkit demo --sections imu --json        # only the orientation filters, as JSON
+  mocapkit demo --warm-up                    # compile the kernels once (make setup does)
 
 Sections: teleop (a simulated suit streams over loopback UDP through the receiver,
 filters, body model, Robonaut-arm retargeting and the robot-server process, in real
@@ -51,10 +52,31 @@ def register(sub: Any) -> None:
     demo.add_argument("--seed", type=int, default=0, help="sensor noise and mounting seed")
     demo.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     demo.add_argument("--no-progress", action="store_true", help="no progress bars")
+    demo.add_argument(
+        "--warm-up",
+        action="store_true",
+        help="only compile the numba kernels the demo uses (2 processes), then exit: a "
+        "machine's first demo otherwise spends about a minute compiling",
+    )
     demo.set_defaults(func=_demo)
 
 
+def _warm_up(args: argparse.Namespace) -> int:
+    from mocapkit.demo.warm_up import warm_up
+
+    def done(task: str, seconds: float) -> None:
+        if not args.json:
+            print(f"warm-up: {task} ready in {seconds:.1f} s", file=sys.stderr)
+
+    seconds = warm_up(on_done=done)
+    if args.json:
+        print_json({"warm_up_seconds": seconds})
+    return EXIT_OK
+
+
 def _demo(args: argparse.Namespace) -> int:
+    if args.warm_up:
+        return _warm_up(args)
     from mocapkit.demo.run import DemoConfig, run_demo
 
     cfg = DemoConfig(

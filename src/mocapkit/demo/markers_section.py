@@ -57,8 +57,12 @@ class MarkerOutcome:
     warnings: list[str] = field(default_factory=list)
 
 
-def run_markers(out_dir: Path, progress: Progress = no_progress) -> dict[str, Any]:
-    """Reconstruct the bundled trial by direct marker control and by IK.
+def run_markers(
+    out_dir: Path,
+    progress: Progress = no_progress,
+    methods: tuple[Literal["osc", "ik"], ...] = ("osc", "ik"),
+) -> dict[str, Any]:
+    """Reconstruct the bundled trial by direct marker control and by IK (``methods``).
 
     Returns ``{"status": "ok", "outcomes": [MarkerOutcome, ...], "outputs": {...}}``, or
     ``{"status": "unavailable", "reason": ...}`` when ``mocapkit.markers`` is absent.
@@ -75,9 +79,8 @@ def run_markers(out_dir: Path, progress: Progress = no_progress) -> dict[str, An
     outputs: dict[str, Path] = {}
     with ExitStack() as stack:
         walk, static = bundled_marker_files(stack)
-        methods: tuple[Literal["osc", "ik"], ...] = ("osc", "ik")
         for i, method in enumerate(methods):
-            progress("marker reconstruction", i, 2)
+            progress("marker reconstruction", i, len(methods))
             result, _subject, _cleaning = run(
                 walk, static, None, None, None, ReconstructionOptions(method=method)
             )
@@ -94,7 +97,7 @@ def run_markers(out_dir: Path, progress: Progress = no_progress) -> dict[str, An
                     list(result.warnings),
                 )
             )
-        progress("marker reconstruction", 2, 2)
+        progress("marker reconstruction", len(methods), len(methods))
     return {"status": "ok", "outcomes": outcomes, "outputs": outputs}
 
 
