@@ -7,12 +7,20 @@ import pytest
 from hypothesis import given
 
 from mocapkit.errors import DataError
-from mocapkit.geometry import quat_from_axis_angle, quat_mul, quat_rotate, quat_rotate_inv
+from mocapkit.geometry import (
+    quat_exp,
+    quat_from_axis_angle,
+    quat_identity,
+    quat_mul,
+    quat_rotate,
+    quat_rotate_inv,
+)
 from mocapkit.imu.initialisation import (
     dip_correct,
     initial_orientation,
     orientation_from_references,
     reference_vectors,
+    rotate_to_first_frame,
 )
 from tests.imu.synthetic import DIP, FIELD_WORLD, GRAVITY
 from tests.strategies import same_rotation, unit_quats
@@ -81,3 +89,18 @@ def test_initialisation_errors_name_the_field() -> None:
         reference_vectors([0.0, 0.0, 9.8], [0.0, 0.0, -40.0])
     with pytest.raises(DataError, match="mag: no finite sample"):
         reference_vectors([0.0, 0.0, 9.8], np.full((3, 3), np.nan))
+
+
+def test_rotate_to_first_frame_equals_the_sample_by_sample_product() -> None:
+    rng = np.random.default_rng(4)
+    gyr = rng.normal(size=(60, 3)) * 3.0
+    gyr[::7] = 0.0  # the small-angle branch of quat_exp
+    vectors = rng.normal(size=(60, 3))
+    steps = rng.uniform(0.005, 0.02, size=60)
+    expected = np.empty_like(vectors)
+    d = quat_identity()
+    for i in range(60):
+        d = quat_mul(d, quat_exp(0.5 * gyr[i] * steps[i]))
+        expected[i] = quat_rotate(d, vectors[i])
+    # the same arithmetic in the same order: equal to the last bit
+    np.testing.assert_array_equal(rotate_to_first_frame(gyr, steps, vectors), expected)

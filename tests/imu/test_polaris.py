@@ -7,7 +7,7 @@ import pytest
 
 from mocapkit.errors import ConfigError, DataError, ShapeError
 from mocapkit.geometry import quat_from_axis_angle
-from mocapkit.imu.filters import Polaris, PolarisParams, make_filter
+from mocapkit.imu.filters import Polaris, PolarisParams, make_filter, polaris_offline
 from mocapkit.imu.filters.polaris_timing import estimate_mag_delay
 from mocapkit.imu.metrics import error_quat_world, heading_error, inclination_error, total_error
 
@@ -280,3 +280,27 @@ def test_reset_and_reset_heading() -> None:
     f.reset()
     assert not f.get_state().started
     np.testing.assert_array_equal(f.run(s.gyr, s.acc, s.mag), first)
+
+
+def test_offline_fused_kernels_equal_the_numpy_steps(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Upside down the low-passed vertical is antiparallel to up at the start (the fused
+    # inclination kernel leaves that to numpy); zero-norm accelerometer rows are
+    # interpolated; the fused kernels follow numpy's arithmetic, so equal to the bit.
+    s = make_synthetic(20.0, RATE, q0=quat_from_axis_angle([1.0, 0.0, 0.0], np.pi))
+    acc = s.acc.copy()
+    acc[300:320] = 0.0
+    for mag in (s.mag, None):
+        fused = Polaris(rate_hz=RATE).smooth(s.gyr, acc, mag)
+        with monkeypatch.context() as m:
+            m.setattr(
+                polaris_offline,
+                "_tail_fast",
+                lambda *args: polaris_offline._tail_numpy(*args[:2], "fast", *args[2:]),
+            )
+            steps = Polaris(rate_hz=RATE).smooth(s.gyr, acc, mag)
+        np.testing.assert_array_equal(fused.q6, steps.q6)
+        np.testing.assert_array_equal(fused.bias, steps.bias)
+        if mag is not None:
+            assert fused.q9 is not None
+            assert steps.q9 is not None
+            np.testing.assert_array_equal(fused.q9, steps.q9)

@@ -65,17 +65,31 @@ def qmul(
 
 
 @njit(cache=True, inline="always")
-def rotation_matrix_into(w: float, x: float, y: float, z: float, R: np.ndarray) -> None:
-    """``R = quat_to_matrix([w, x, y, z])`` (same formula as ``geometry``)."""
+def rotation_matrix(
+    w: float, x: float, y: float, z: float
+) -> tuple[float, float, float, float, float, float, float, float, float]:
+    """``quat_to_matrix([w, x, y, z])`` row by row as nine scalars (same formula as
+    ``geometry``), for kernels that keep the matrix in locals."""
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z
-    R[0, 0] = 1 - 2 * (yy + zz)
-    R[0, 1] = 2 * (xy - wz)
-    R[0, 2] = 2 * (xz + wy)
-    R[1, 0] = 2 * (xy + wz)
-    R[1, 1] = 1 - 2 * (xx + zz)
-    R[1, 2] = 2 * (yz - wx)
-    R[2, 0] = 2 * (xz - wy)
-    R[2, 1] = 2 * (yz + wx)
-    R[2, 2] = 1 - 2 * (xx + yy)
+    return (
+        1 - 2 * (yy + zz),
+        2 * (xy - wz),
+        2 * (xz + wy),
+        2 * (xy + wz),
+        1 - 2 * (xx + zz),
+        2 * (yz - wx),
+        2 * (xz - wy),
+        2 * (yz + wx),
+        1 - 2 * (xx + yy),
+    )
+
+
+@njit(cache=True, inline="always")
+def rotation_matrix_into(w: float, x: float, y: float, z: float, R: np.ndarray) -> None:
+    """``R = quat_to_matrix([w, x, y, z])`` (same formula as ``geometry``)."""
+    r = rotation_matrix(w, x, y, z)
+    R[0, 0], R[0, 1], R[0, 2] = r[0], r[1], r[2]
+    R[1, 0], R[1, 1], R[1, 2] = r[3], r[4], r[5]
+    R[2, 0], R[2, 1], R[2, 2] = r[6], r[7], r[8]

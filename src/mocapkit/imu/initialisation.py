@@ -168,12 +168,20 @@ def rotate_to_first_frame(gyr: Any, dt: Any, vectors: Any) -> FloatArray:
     g = as_vectors(gyr, "gyr", 3)
     v = as_vectors(vectors, "vectors", 3)
     steps = np.broadcast_to(np.asarray(dt, dtype=np.float64), (g.shape[0],))
-    out = np.empty_like(v)
-    d = quat_identity()
-    for i in range(v.shape[0]):
-        d = quat_mul(d, quat_exp(0.5 * g[i] * steps[i]))
-        out[i] = quat_rotate(d, v[i])
-    return out
+    # the half-angle exponentials and the rotations are vectorised; only the running
+    # product is sequential, on Python floats (the arithmetic of quat_mul, term by term)
+    e = quat_exp(0.5 * g * steps[:, None]).tolist()
+    d = np.empty((v.shape[0], 4))
+    w, x, y, z = 1.0, 0.0, 0.0, 0.0
+    for i, (w2, x2, y2, z2) in enumerate(e):
+        w, x, y, z = (
+            w * w2 - x * x2 - y * y2 - z * z2,
+            w * x2 + x * w2 + y * z2 - z * y2,
+            w * y2 - x * z2 + y * w2 + z * x2,
+            w * z2 + x * y2 - y * x2 + z * w2,
+        )
+        d[i] = w, x, y, z
+    return quat_rotate(d, v)
 
 
 def initial_orientation(acc_window: Any, mag_window: Any = None, prior: Any = None) -> FloatArray:

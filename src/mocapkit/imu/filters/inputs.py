@@ -4,6 +4,7 @@ kernels take (:class:`FilterInputs`) and what was done with doubtful samples
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
 from typing import Any, NamedTuple
@@ -11,7 +12,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from mocapkit._validate import FloatArray, as_float_array, check_finite, check_shape
-from mocapkit.errors import DataError
+from mocapkit.errors import DataError, MocapkitError
+from mocapkit.imu.filters.inputs_kernel import scan_inputs
 
 # A sample whose norm is below this (in its own unit) has no direction.
 MIN_VECTOR_NORM = 1e-6
@@ -91,7 +93,67 @@ def prepare_inputs(
 ) -> tuple[FilterInputs, RunReport]:
     """Validate a batch and build the kernels' inputs and the report (see base.py's
     module docstring for every case). ``default_dt`` [s] is used when ``dt`` is None;
-    ``acc_range`` [m/s^2] and ``gyr_range`` [rad/s] are the full-scale ranges or None."""
+    ``acc_range`` [m/s^2] and ``gyr_range`` [rad/s] are the full-scale ranges or None.
+
+    A clean batch takes one numba pass (:mod:`mocapkit.imu.filters.inputs_kernel`);
+    anything doubtful takes the numpy checks below, which raise or warn naming the sample.
+    """
+    fast = _prepare_clean(gyr, acc, mag, dt, default_dt, acc_range, gyr_range)
+    if fast is not None:
+        return fast
+    return _prepare_checked(gyr, acc, mag, dt, default_dt, acc_range, gyr_range)
+
+
+def _prepare_clean(
+    gyr: Any,
+    acc: Any,
+    mag: Any,
+    dt: Any,
+    default_dt: float,
+    acc_range: float | None,
+    gyr_range: float | None,
+) -> tuple[FilterInputs, RunReport] | None:
+    """:func:`prepare_inputs` for a clean batch (the same arrays and report), or None when
+    the batch needs the numpy checks (bad shape or value, saturated gyroscope)."""
+    try:
+        g = np.ascontiguousarray(as_float_array(gyr, "gyr"))
+        a = np.ascontiguousarray(as_float_array(acc, "acc"))
+        m = None if mag is None else np.ascontiguousarray(as_float_array(mag, "mag"))
+    except MocapkitError:
+        return None
+    n = g.shape[0] if g.ndim == 2 else -1
+    if g.shape != (n, 3) or a.shape != (n, 3) or (m is not None and m.shape != (n, 3)):
+        return None
+    use_acc = np.empty(n, dtype=bool)
+    use_mag = np.empty(n, dtype=bool)
+    clean, acc_rejected, mag_gaps, mag_rejected = scan_inputs(
+        g,
+        a,
+        g if m is None else m,
+        m is not None,
+        MIN_VECTOR_NORM,
+        math.inf if acc_range is None else _SATURATION_FRACTION * acc_range,
+        math.inf if gyr_range is None else _SATURATION_FRACTION * gyr_range,
+        use_acc,
+        use_mag,
+    )
+    if not clean:
+        return None
+    steps = np.ascontiguousarray(_dt_array(dt, n, default_dt))
+    inputs = FilterInputs(g, a, np.zeros((n, 3)) if m is None else m, steps, use_acc, use_mag)
+    return inputs, RunReport(n, acc_rejected, mag_gaps, mag_rejected, 0)
+
+
+def _prepare_checked(
+    gyr: Any,
+    acc: Any,
+    mag: Any,
+    dt: Any,
+    default_dt: float,
+    acc_range: float | None,
+    gyr_range: float | None,
+) -> tuple[FilterInputs, RunReport]:
+    """:func:`prepare_inputs` with numpy checks that name the first bad sample."""
     g = as_float_array(gyr, "gyr")
     check_shape(g, "gyr", None, 3)
     a = as_float_array(acc, "acc")
@@ -117,7 +179,7 @@ def prepare_inputs(
                 "underestimated and only the accelerometer/magnetometer correction "
                 "recovers it. Use a larger gyroscope range if the device has one.",
                 SensorSaturationWarning,
-                stacklevel=4,
+                stacklevel=5,  # the caller of OrientationFilter.run
             )
     mag_gaps = mag_rejected = 0
     if mag is None:

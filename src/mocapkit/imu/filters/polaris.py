@@ -88,6 +88,8 @@ GRAVITY = 9.81  # [m/s^2] only to seed the low-pass when a batch has no usable a
 
 def _check_output(q: FloatArray) -> None:
     """A kernel bug must never reach the user as a NaN quaternion."""
+    if np.isfinite(q).all():  # one flat pass (the per-row reduction costs ~15 ns/sample)
+        return
     bad = ~np.isfinite(q).all(axis=1)
     if bad.any():
         raise DataError(

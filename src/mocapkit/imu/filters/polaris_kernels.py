@@ -13,7 +13,7 @@ import math
 import numpy as np
 from numba import njit
 
-from mocapkit.geometry.kernels import qmul, rotation_matrix_into
+from mocapkit.geometry.kernels import qmul, rotation_matrix, rotation_matrix_into
 from mocapkit.imu.filters.polaris_heading_kernels import heading_update, start_heading
 from mocapkit.imu.filters.polaris_params import (
     C_A1,
@@ -254,6 +254,24 @@ def _tilt_update(c: np.ndarray, s: np.ndarray, P: np.ndarray, R: np.ndarray, v: 
     s[S_REST_COUNT] = 0.0
 
 
+@njit(cache=True, inline="always")
+def _lp(
+    value: float, y: float, m0: float, m1: float, warm: float, warmup: float,
+    b0: float, b1: float, b2: float, a1: float, a2: float,
+) -> tuple[float, float, float]:  # fmt: skip
+    """:func:`_lowpass` on locals: one channel with previous output ``y`` and Butterworth
+    memory ``m0, m1``; returns the new ``(y, m0, m1)``."""
+    if warm > 0.0:
+        y = y + (value - y) / warm
+        if warm >= warmup:
+            st2 = (b2 - a2) * y
+            m0 = (b1 - a1) * y + st2
+            m1 = st2
+        return y, m0, m1
+    y = b0 * value + m0
+    return y, b1 * value - a1 * y + m1, b2 * value - a2 * y
+
+
 @njit(cache=True)
 def polaris_kernel(
     c: np.ndarray,
@@ -270,12 +288,24 @@ def polaris_kernel(
     aux: np.ndarray,
 ) -> None:
     """Process N samples from the started flat state ``s`` (in place); see
-    :func:`mocapkit.imu.filters.polaris_reference.run_reference` for the arguments."""
+    :func:`mocapkit.imu.filters.polaris_reference.run_reference` for the arguments.
+
+    The state that changes every sample lives in locals for the whole loop (loads and
+    stores through ``s`` cannot be kept in registers: numba cannot tell that ``s`` and the
+    output arrays do not overlap); it is written to ``s`` before a block update reads it,
+    read back after the update changed it, and written at the end."""
     block = c[C_BLOCK]
     delay = int(c[C_MAG_DELAY])
     alpha = c[C_REST_ALPHA]
     th_gyr2 = c[C_REST_TH_GYR] * c[C_REST_TH_GYR]
     th_acc2 = c[C_REST_TH_ACC] * c[C_REST_TH_ACC]
+    rest_min_time = c[C_REST_MIN_TIME]
+    warmup = c[C_WARMUP]
+    lin_decay = c[C_LIN_DECAY]
+    lin_deadband = c[C_LIN_DEADBAND]
+    lin_warm = c[C_LIN_WARM]
+    ac_alpha = c[C_AC_ALPHA]
+    b0, b1, b2, a1, a2 = c[C_B0], c[C_B1], c[C_B2], c[C_A1], c[C_A2]
     want_aux = aux.shape[0] > 0
     R = np.empty((3, 3))
     Pt = np.empty((5, 5))
@@ -287,12 +317,53 @@ def polaris_kernel(
     nu = np.empty(3)
     scratch = np.empty(15)
     hc, hs = math.cos(0.5 * s[S_MAG_X]), math.sin(0.5 * s[S_MAG_X])  # Rz(delta), cached
+    # -- the per-sample state in locals ------------------------------------------------------
+    w, x, y, z = s[S_Q_GYR], s[S_Q_GYR + 1], s[S_Q_GYR + 2], s[S_Q_GYR + 3]
+    pos = int(s[S_HISTORY_POS])
+    lgx, lgy, lgz = s[S_REST_GYR_LP], s[S_REST_GYR_LP + 1], s[S_REST_GYR_LP + 2]
+    lax, lay, laz = s[S_REST_ACC_LP], s[S_REST_ACC_LP + 1], s[S_REST_ACC_LP + 2]
+    rest_time = s[S_REST_TIME]
+    rsx, rsy, rsz = s[S_REST_GYR_SUM], s[S_REST_GYR_SUM + 1], s[S_REST_GYR_SUM + 2]
+    rest_count = s[S_REST_COUNT]
+    warmup_count = s[S_WARMUP_COUNT]
+    lin_var, lin_mean, lin_m2 = s[S_LIN_VAR], s[S_LIN_MEAN], s[S_LIN_M2]
+    alp0, alp1, alp2 = s[S_ACC_LP], s[S_ACC_LP + 1], s[S_ACC_LP + 2]
+    am00, am01 = s[S_ACC_LP_STATE], s[S_ACC_LP_STATE + 1]
+    am10, am11 = s[S_ACC_LP_STATE + 2], s[S_ACC_LP_STATE + 3]
+    am20, am21 = s[S_ACC_LP_STATE + 4], s[S_ACC_LP_STATE + 5]
+    acc_norm_slow = s[S_ACC_NORM_SLOW]
+    jz0, jz1, jz2 = s[S_DRIFT_JZ], s[S_DRIFT_JZ + 1], s[S_DRIFT_JZ + 2]
+    mag_ready = s[S_MAG_READY] != 0.0
+    scale = s[S_MAG_SCALE]
+    my0, my1, my2 = s[S_MAG_Y_SUM], s[S_MAG_Y_SUM + 1], s[S_MAG_Y_SUM + 2]
+    mr00, mr01, mr02 = s[S_MAG_R_SUM], s[S_MAG_R_SUM + 1], s[S_MAG_R_SUM + 2]
+    mr10, mr11, mr12 = s[S_MAG_R_SUM + 3], s[S_MAG_R_SUM + 4], s[S_MAG_R_SUM + 5]
+    mr20, mr21, mr22 = s[S_MAG_R_SUM + 6], s[S_MAG_R_SUM + 7], s[S_MAG_R_SUM + 8]
+    mag_count, mag_rate2 = s[S_MAG_COUNT], s[S_MAG_RATE2_SUM]
+    block_count, block_time = s[S_BLOCK_COUNT], s[S_BLOCK_TIME]
+    # ... and the state a block update changes (read again after each update)
+    qa0, qa1, qa2, qa3 = s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3]
+    bx, by, bz = s[S_BIAS], s[S_BIAS + 1], s[S_BIAS + 2]
+    j0, j1, j2 = s[S_DRIFT_J], s[S_DRIFT_J + 1], s[S_DRIFT_J + 2]
+    j3, j4, j5 = s[S_DRIFT_J + 3], s[S_DRIFT_J + 4], s[S_DRIFT_J + 5]
+    jl0, jl1, jl2 = s[S_DRIFT_J_LP], s[S_DRIFT_J_LP + 1], s[S_DRIFT_J_LP + 2]
+    jl3, jl4, jl5 = s[S_DRIFT_J_LP + 3], s[S_DRIFT_J_LP + 4], s[S_DRIFT_J_LP + 5]
+    jm00, jm01 = s[S_DRIFT_J_LP_STATE], s[S_DRIFT_J_LP_STATE + 1]
+    jm10, jm11 = s[S_DRIFT_J_LP_STATE + 2], s[S_DRIFT_J_LP_STATE + 3]
+    jm20, jm21 = s[S_DRIFT_J_LP_STATE + 4], s[S_DRIFT_J_LP_STATE + 5]
+    jm30, jm31 = s[S_DRIFT_J_LP_STATE + 6], s[S_DRIFT_J_LP_STATE + 7]
+    jm40, jm41 = s[S_DRIFT_J_LP_STATE + 8], s[S_DRIFT_J_LP_STATE + 9]
+    jm50, jm51 = s[S_DRIFT_J_LP_STATE + 10], s[S_DRIFT_J_LP_STATE + 11]
+    g0, g1 = s[S_DRIFT_G], s[S_DRIFT_G + 1]
+    gl0, gl1 = s[S_DRIFT_G_LP], s[S_DRIFT_G_LP + 1]
+    gm00, gm01 = s[S_DRIFT_G_LP_STATE], s[S_DRIFT_G_LP_STATE + 1]
+    gm10, gm11 = s[S_DRIFT_G_LP_STATE + 2], s[S_DRIFT_G_LP_STATE + 3]
     for k in range(gyr.shape[0]):
         step = dt[k]
         gx, gy, gz = gyr[k, 0], gyr[k, 1], gyr[k, 2]
         ax, ay, az = acc[k, 0], acc[k, 1], acc[k, 2]
         # (P1) strapdown.
-        rx, ry, rz = gx - s[S_BIAS], gy - s[S_BIAS + 1], gz - s[S_BIAS + 2]
+        rx, ry, rz = gx - bx, gy - by, gz - bz
         wx, wy, wz = rx * step, ry * step, rz * step
         angle = math.sqrt(wx * wx + wy * wy + wz * wz)
         if angle <= 1e-15:
@@ -300,122 +371,169 @@ def polaris_kernel(
         else:
             sh = math.sin(0.5 * angle) / angle
             dw, dx, dy, dz = math.cos(0.5 * angle), sh * wx, sh * wy, sh * wz
-        w, x, y, z = qmul(
-            s[S_Q_GYR], s[S_Q_GYR + 1], s[S_Q_GYR + 2], s[S_Q_GYR + 3], dw, dx, dy, dz
-        )
+        w, x, y, z = qmul(w, x, y, z, dw, dx, dy, dz)
         n = math.sqrt(w * w + x * x + y * y + z * z)
         w, x, y, z = w / n, x / n, y / n, z / n
-        s[S_Q_GYR], s[S_Q_GYR + 1], s[S_Q_GYR + 2], s[S_Q_GYR + 3] = w, x, y, z
-        pos = int(s[S_HISTORY_POS])
         h = S_HISTORY + 4 * pos
         s[h], s[h + 1], s[h + 2], s[h + 3] = w, x, y, z
-        s[S_HISTORY_POS] = float((pos + 1) % HISTORY_LEN)
+        pos_now = pos
+        pos = (pos + 1) % HISTORY_LEN
         # (P2) rest detector.
-        dgx = gx - s[S_REST_GYR_LP]
-        dgy = gy - s[S_REST_GYR_LP + 1]
-        dgz = gz - s[S_REST_GYR_LP + 2]
-        dax = ax - s[S_REST_ACC_LP]
-        day = ay - s[S_REST_ACC_LP + 1]
-        daz = az - s[S_REST_ACC_LP + 2]
-        s[S_REST_GYR_LP] += alpha * dgx
-        s[S_REST_GYR_LP + 1] += alpha * dgy
-        s[S_REST_GYR_LP + 2] += alpha * dgz
-        s[S_REST_ACC_LP] += alpha * dax
-        s[S_REST_ACC_LP + 1] += alpha * day
-        s[S_REST_ACC_LP + 2] += alpha * daz
-        lgx, lgy, lgz = s[S_REST_GYR_LP], s[S_REST_GYR_LP + 1], s[S_REST_GYR_LP + 2]
+        dgx, dgy, dgz = gx - lgx, gy - lgy, gz - lgz
+        dax, day, daz = ax - lax, ay - lay, az - laz
+        lgx += alpha * dgx
+        lgy += alpha * dgy
+        lgz += alpha * dgz
+        lax += alpha * dax
+        lay += alpha * day
+        laz += alpha * daz
         still = (
             use_acc[k]
             and dgx * dgx + dgy * dgy + dgz * dgz < th_gyr2
             and dax * dax + day * day + daz * daz < th_acc2
             and lgx * lgx + lgy * lgy + lgz * lgz < th_gyr2
         )
-        s[S_REST_TIME] = s[S_REST_TIME] + step if still else 0.0
-        if s[S_REST_TIME] >= c[C_REST_MIN_TIME]:
-            s[S_REST_GYR_SUM] += gx
-            s[S_REST_GYR_SUM + 1] += gy
-            s[S_REST_GYR_SUM + 2] += gz
-            s[S_REST_COUNT] += 1.0
+        rest_time = rest_time + step if still else 0.0
+        if rest_time >= rest_min_time:
+            rsx += gx
+            rsy += gy
+            rsz += gz
+            rest_count += 1.0
         # (P3) accelerometer in I, low-passed.
         warm = 0.0
-        if s[S_WARMUP_COUNT] < c[C_WARMUP]:
-            warm = s[S_WARMUP_COUNT] + 1.0
-            s[S_WARMUP_COUNT] = warm
+        if warmup_count < warmup:
+            warm = warmup_count + 1.0
+            warmup_count = warm
         if warm == 0.0:  # (P3a) the Butterworth forgets the warm-up's running mean
-            s[S_LIN_VAR] *= c[C_LIN_DECAY]
+            lin_var *= lin_decay
         if use_acc[k]:
-            rotation_matrix_into(w, x, y, z, R)
-            for i in range(3):
-                a_i = R[i, 0] * ax + R[i, 1] * ay + R[i, 2] * az
-                s[S_ACC_LP + i] = _lowpass(c, a_i, s, S_ACC_LP + i, S_ACC_LP_STATE + 2 * i, warm)
+            r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_matrix(w, x, y, z)
+            e0 = r00 * ax + r01 * ay + r02 * az
+            e1 = r10 * ax + r11 * ay + r12 * az
+            e2 = r20 * ax + r21 * ay + r22 * az
+            alp0, am00, am01 = _lp(e0, alp0, am00, am01, warm, warmup, b0, b1, b2, a1, a2)
+            alp1, am10, am11 = _lp(e1, alp1, am10, am11, warm, warmup, b0, b1, b2, a1, a2)
+            alp2, am20, am21 = _lp(e2, alp2, am20, am21, warm, warmup, b0, b1, b2, a1, a2)
             if warm > 0.0:  # (P3a) spread of |acc| while warming up (Welford)
                 a_n = math.sqrt(ax * ax + ay * ay + az * az)
-                d = a_n - s[S_LIN_MEAN]
-                s[S_LIN_MEAN] += d / warm
-                s[S_LIN_M2] += d * (a_n - s[S_LIN_MEAN])
-                s[S_LIN_VAR] = max(0.0, s[S_LIN_M2] / warm - c[C_LIN_DEADBAND]) * c[C_LIN_WARM]
-            lp_n = math.sqrt(s[S_ACC_LP] ** 2 + s[S_ACC_LP + 1] ** 2 + s[S_ACC_LP + 2] ** 2)
-            s[S_ACC_NORM_SLOW] += c[C_AC_ALPHA] * (lp_n - s[S_ACC_NORM_SLOW])
+                d = a_n - lin_mean
+                lin_mean += d / warm
+                lin_m2 += d * (a_n - lin_mean)
+                lin_var = max(0.0, lin_m2 / warm - lin_deadband) * lin_warm
+            lp_n = math.sqrt(alp0**2 + alp1**2 + alp2**2)
+            acc_norm_slow += ac_alpha * (lp_n - acc_norm_slow)
         # (P4) drift integrals.
-        q0, q1, q2, q3 = qmul(
-            s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3], w, x, y, z
-        )
-        rotation_matrix_into(q0, q1, q2, q3, R)
-        bx, by, bz = s[S_BIAS], s[S_BIAS + 1], s[S_BIAS + 2]
-        for i in range(2):
-            for jj in range(3):
-                s[S_DRIFT_J + 3 * i + jj] += R[i, jj] * step
-            s[S_DRIFT_G + i] += (R[i, 0] * bx + R[i, 1] * by + R[i, 2] * bz) * step
-        for jj in range(3):
-            s[S_DRIFT_JZ + jj] += R[2, jj] * step
-        for i in range(6):
-            s[S_DRIFT_J_LP + i] = _lowpass(
-                c, s[S_DRIFT_J + i], s, S_DRIFT_J_LP + i, S_DRIFT_J_LP_STATE + 2 * i, warm
-            )
-        for i in range(2):
-            s[S_DRIFT_G_LP + i] = _lowpass(
-                c, s[S_DRIFT_G + i], s, S_DRIFT_G_LP + i, S_DRIFT_G_LP_STATE + 2 * i, warm
-            )
+        q0, q1, q2, q3 = qmul(qa0, qa1, qa2, qa3, w, x, y, z)
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_matrix(q0, q1, q2, q3)
+        j0 += r00 * step
+        j1 += r01 * step
+        j2 += r02 * step
+        g0 += (r00 * bx + r01 * by + r02 * bz) * step
+        j3 += r10 * step
+        j4 += r11 * step
+        j5 += r12 * step
+        g1 += (r10 * bx + r11 * by + r12 * bz) * step
+        jz0 += r20 * step
+        jz1 += r21 * step
+        jz2 += r22 * step
+        jl0, jm00, jm01 = _lp(j0, jl0, jm00, jm01, warm, warmup, b0, b1, b2, a1, a2)
+        jl1, jm10, jm11 = _lp(j1, jl1, jm10, jm11, warm, warmup, b0, b1, b2, a1, a2)
+        jl2, jm20, jm21 = _lp(j2, jl2, jm20, jm21, warm, warmup, b0, b1, b2, a1, a2)
+        jl3, jm30, jm31 = _lp(j3, jl3, jm30, jm31, warm, warmup, b0, b1, b2, a1, a2)
+        jl4, jm40, jm41 = _lp(j4, jl4, jm40, jm41, warm, warmup, b0, b1, b2, a1, a2)
+        jl5, jm50, jm51 = _lp(j5, jl5, jm50, jm51, warm, warmup, b0, b1, b2, a1, a2)
+        gl0, gm00, gm01 = _lp(g0, gl0, gm00, gm01, warm, warmup, b0, b1, b2, a1, a2)
+        gl1, gm10, gm11 = _lp(g1, gl1, gm10, gm11, warm, warmup, b0, b1, b2, a1, a2)
         # (P5) magnetometer.
         if has_mag and use_mag[k]:
-            if delay > 0:  # else R already holds R6 = R(q_acc * q_gyr), the same numbers
-                hp = S_HISTORY + 4 * ((pos - delay) % HISTORY_LEN)
-                m0, m1, m2, m3 = qmul(
-                    s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3],
-                    s[hp], s[hp + 1], s[hp + 2], s[hp + 3],
-                )  # fmt: skip
-                rotation_matrix_into(m0, m1, m2, m3, R)
+            if delay > 0:  # else R6 = R(q_acc * q_gyr) above, the same numbers
+                hp = S_HISTORY + 4 * ((pos_now - delay) % HISTORY_LEN)
+                m0, m1, m2, m3 = qmul(qa0, qa1, qa2, qa3, s[hp], s[hp + 1], s[hp + 2], s[hp + 3])
+                r00, r01, r02, r10, r11, r12, r20, r21, r22 = rotation_matrix(m0, m1, m2, m3)
             mx, my, mz = mag[k, 0], mag[k, 1], mag[k, 2]
-            if s[S_MAG_READY] == 0.0:
+            if not mag_ready:
+                R[0, 0], R[0, 1], R[0, 2] = r00, r01, r02
+                R[1, 0], R[1, 1], R[1, 2] = r10, r11, r12
+                R[2, 0], R[2, 1], R[2, 2] = r20, r21, r22
                 start_heading(c, s, R, mx, my, mz)
+                mag_ready = True
+                scale = s[S_MAG_SCALE]
                 hc, hs = math.cos(0.5 * s[S_MAG_X]), math.sin(0.5 * s[S_MAG_X])
-            scale = s[S_MAG_SCALE]
             ux, uy, uz = mx / scale, my / scale, mz / scale
-            for i in range(3):
-                s[S_MAG_Y_SUM + i] += R[i, 0] * ux + R[i, 1] * uy + R[i, 2] * uz
-                for jj in range(3):
-                    s[S_MAG_R_SUM + 3 * i + jj] += R[i, jj]
-            s[S_MAG_COUNT] += 1.0
-            s[S_MAG_RATE2_SUM] += rx * rx + ry * ry + rz * rz
-        s[S_BLOCK_COUNT] += 1.0
-        s[S_BLOCK_TIME] += step
-        if s[S_BLOCK_COUNT] >= block:
+            my0 += r00 * ux + r01 * uy + r02 * uz
+            mr00 += r00
+            mr01 += r01
+            mr02 += r02
+            my1 += r10 * ux + r11 * uy + r12 * uz
+            mr10 += r10
+            mr11 += r11
+            mr12 += r12
+            my2 += r20 * ux + r21 * uy + r22 * uz
+            mr20 += r20
+            mr21 += r21
+            mr22 += r22
+            mag_count += 1.0
+            mag_rate2 += rx * rx + ry * ry + rz * rz
+        block_count += 1.0
+        block_time += step
+        if block_count >= block:
+            # the state the updates read
+            s[S_BLOCK_TIME] = block_time
+            s[S_REST_TIME] = rest_time
+            s[S_REST_GYR_SUM], s[S_REST_GYR_SUM + 1], s[S_REST_GYR_SUM + 2] = rsx, rsy, rsz
+            s[S_REST_COUNT] = rest_count
+            s[S_ACC_LP], s[S_ACC_LP + 1], s[S_ACC_LP + 2] = alp0, alp1, alp2
+            s[S_ACC_NORM_SLOW] = acc_norm_slow
+            s[S_LIN_VAR] = lin_var
+            s[S_DRIFT_J], s[S_DRIFT_J + 1], s[S_DRIFT_J + 2] = j0, j1, j2
+            s[S_DRIFT_J + 3], s[S_DRIFT_J + 4], s[S_DRIFT_J + 5] = j3, j4, j5
+            s[S_DRIFT_J_LP], s[S_DRIFT_J_LP + 1], s[S_DRIFT_J_LP + 2] = jl0, jl1, jl2
+            s[S_DRIFT_J_LP + 3], s[S_DRIFT_J_LP + 4], s[S_DRIFT_J_LP + 5] = jl3, jl4, jl5
+            s[S_DRIFT_J_LP_STATE], s[S_DRIFT_J_LP_STATE + 1] = jm00, jm01
+            s[S_DRIFT_J_LP_STATE + 2], s[S_DRIFT_J_LP_STATE + 3] = jm10, jm11
+            s[S_DRIFT_J_LP_STATE + 4], s[S_DRIFT_J_LP_STATE + 5] = jm20, jm21
+            s[S_DRIFT_J_LP_STATE + 6], s[S_DRIFT_J_LP_STATE + 7] = jm30, jm31
+            s[S_DRIFT_J_LP_STATE + 8], s[S_DRIFT_J_LP_STATE + 9] = jm40, jm41
+            s[S_DRIFT_J_LP_STATE + 10], s[S_DRIFT_J_LP_STATE + 11] = jm50, jm51
+            s[S_DRIFT_G], s[S_DRIFT_G + 1] = g0, g1
+            s[S_DRIFT_G_LP], s[S_DRIFT_G_LP + 1] = gl0, gl1
+            s[S_DRIFT_G_LP_STATE], s[S_DRIFT_G_LP_STATE + 1] = gm00, gm01
+            s[S_DRIFT_G_LP_STATE + 2], s[S_DRIFT_G_LP_STATE + 3] = gm10, gm11
             _tilt_update(c, s, Pt, R, scratch)
-            if has_mag and s[S_MAG_READY] != 0.0:
+            if has_mag and mag_ready:
+                s[S_DRIFT_JZ], s[S_DRIFT_JZ + 1], s[S_DRIFT_JZ + 2] = jz0, jz1, jz2
+                s[S_MAG_Y_SUM], s[S_MAG_Y_SUM + 1], s[S_MAG_Y_SUM + 2] = my0, my1, my2
+                s[S_MAG_R_SUM], s[S_MAG_R_SUM + 1], s[S_MAG_R_SUM + 2] = mr00, mr01, mr02
+                s[S_MAG_R_SUM + 3], s[S_MAG_R_SUM + 4], s[S_MAG_R_SUM + 5] = mr10, mr11, mr12
+                s[S_MAG_R_SUM + 6], s[S_MAG_R_SUM + 7], s[S_MAG_R_SUM + 8] = mr20, mr21, mr22
+                s[S_MAG_COUNT], s[S_MAG_RATE2_SUM] = mag_count, mag_rate2
                 heading_update(c, s, Pm, Hm, PHm, Sm, Sim, nu)
                 hc, hs = math.cos(0.5 * s[S_MAG_X]), math.sin(0.5 * s[S_MAG_X])
-            q0, q1, q2, q3 = qmul(
-                s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3],
-                s[S_Q_GYR], s[S_Q_GYR + 1], s[S_Q_GYR + 2], s[S_Q_GYR + 3],
-            )  # fmt: skip
-            s[S_DRIFT_JZ] = 0.0
-            s[S_DRIFT_JZ + 1] = 0.0
-            s[S_DRIFT_JZ + 2] = 0.0
-            s[S_BLOCK_COUNT] = 0.0
-            s[S_BLOCK_TIME] = 0.0
+                my0 = my1 = my2 = 0.0
+                mr00 = mr01 = mr02 = mr10 = mr11 = mr12 = mr20 = mr21 = mr22 = 0.0
+                mag_count = mag_rate2 = 0.0
+            # what the tilt update changed
+            qa0, qa1, qa2, qa3 = s[S_Q_ACC], s[S_Q_ACC + 1], s[S_Q_ACC + 2], s[S_Q_ACC + 3]
+            bx, by, bz = s[S_BIAS], s[S_BIAS + 1], s[S_BIAS + 2]
+            rsx = rsy = rsz = rest_count = 0.0
+            j0 = j1 = j2 = j3 = j4 = j5 = g0 = g1 = 0.0
+            jl0, jl1, jl2 = s[S_DRIFT_J_LP], s[S_DRIFT_J_LP + 1], s[S_DRIFT_J_LP + 2]
+            jl3, jl4, jl5 = s[S_DRIFT_J_LP + 3], s[S_DRIFT_J_LP + 4], s[S_DRIFT_J_LP + 5]
+            jm00, jm01 = s[S_DRIFT_J_LP_STATE], s[S_DRIFT_J_LP_STATE + 1]
+            jm10, jm11 = s[S_DRIFT_J_LP_STATE + 2], s[S_DRIFT_J_LP_STATE + 3]
+            jm20, jm21 = s[S_DRIFT_J_LP_STATE + 4], s[S_DRIFT_J_LP_STATE + 5]
+            jm30, jm31 = s[S_DRIFT_J_LP_STATE + 6], s[S_DRIFT_J_LP_STATE + 7]
+            jm40, jm41 = s[S_DRIFT_J_LP_STATE + 8], s[S_DRIFT_J_LP_STATE + 9]
+            jm50, jm51 = s[S_DRIFT_J_LP_STATE + 10], s[S_DRIFT_J_LP_STATE + 11]
+            gl0, gl1 = s[S_DRIFT_G_LP], s[S_DRIFT_G_LP + 1]
+            gm00, gm01 = s[S_DRIFT_G_LP_STATE], s[S_DRIFT_G_LP_STATE + 1]
+            gm10, gm11 = s[S_DRIFT_G_LP_STATE + 2], s[S_DRIFT_G_LP_STATE + 3]
+            q0, q1, q2, q3 = qmul(qa0, qa1, qa2, qa3, w, x, y, z)
+            jz0 = jz1 = jz2 = 0.0
+            block_count = block_time = 0.0
         # q6 = q_acc * q_gyr: from (P4), or recomputed above after a block update.
         out6[k, 0], out6[k, 1], out6[k, 2], out6[k, 3] = q0, q1, q2, q3
-        if s[S_MAG_READY] != 0.0:
+        if mag_ready:
             h0, h1, h2, h3 = qmul(hc, 0.0, 0.0, hs, q0, q1, q2, q3)
             out9[k, 0], out9[k, 1], out9[k, 2], out9[k, 3] = h0, h1, h2, h3
         else:
@@ -425,7 +543,43 @@ def polaris_kernel(
             aux[k, 1] = s[S_TILT_P + 1]
             aux[k, 2] = s[S_TILT_P + 6]
             aux[k, 3] = s[S_MAG_P]
-            aux[k, 4] = s[S_BIAS]
-            aux[k, 5] = s[S_BIAS + 1]
-            aux[k, 6] = s[S_BIAS + 2]
+            aux[k, 4] = bx
+            aux[k, 5] = by
+            aux[k, 6] = bz
             aux[k, 7] = (s[S_TILT_P + 12] + s[S_TILT_P + 18] + s[S_TILT_P + 24]) / 3.0
+    # -- write the locals back ---------------------------------------------------------------
+    s[S_Q_GYR], s[S_Q_GYR + 1], s[S_Q_GYR + 2], s[S_Q_GYR + 3] = w, x, y, z
+    s[S_HISTORY_POS] = float(pos)
+    s[S_REST_GYR_LP], s[S_REST_GYR_LP + 1], s[S_REST_GYR_LP + 2] = lgx, lgy, lgz
+    s[S_REST_ACC_LP], s[S_REST_ACC_LP + 1], s[S_REST_ACC_LP + 2] = lax, lay, laz
+    s[S_REST_TIME] = rest_time
+    s[S_REST_GYR_SUM], s[S_REST_GYR_SUM + 1], s[S_REST_GYR_SUM + 2] = rsx, rsy, rsz
+    s[S_REST_COUNT] = rest_count
+    s[S_WARMUP_COUNT] = warmup_count
+    s[S_LIN_VAR], s[S_LIN_MEAN], s[S_LIN_M2] = lin_var, lin_mean, lin_m2
+    s[S_ACC_LP], s[S_ACC_LP + 1], s[S_ACC_LP + 2] = alp0, alp1, alp2
+    s[S_ACC_LP_STATE], s[S_ACC_LP_STATE + 1] = am00, am01
+    s[S_ACC_LP_STATE + 2], s[S_ACC_LP_STATE + 3] = am10, am11
+    s[S_ACC_LP_STATE + 4], s[S_ACC_LP_STATE + 5] = am20, am21
+    s[S_ACC_NORM_SLOW] = acc_norm_slow
+    s[S_DRIFT_JZ], s[S_DRIFT_JZ + 1], s[S_DRIFT_JZ + 2] = jz0, jz1, jz2
+    s[S_MAG_Y_SUM], s[S_MAG_Y_SUM + 1], s[S_MAG_Y_SUM + 2] = my0, my1, my2
+    s[S_MAG_R_SUM], s[S_MAG_R_SUM + 1], s[S_MAG_R_SUM + 2] = mr00, mr01, mr02
+    s[S_MAG_R_SUM + 3], s[S_MAG_R_SUM + 4], s[S_MAG_R_SUM + 5] = mr10, mr11, mr12
+    s[S_MAG_R_SUM + 6], s[S_MAG_R_SUM + 7], s[S_MAG_R_SUM + 8] = mr20, mr21, mr22
+    s[S_MAG_COUNT], s[S_MAG_RATE2_SUM] = mag_count, mag_rate2
+    s[S_BLOCK_COUNT], s[S_BLOCK_TIME] = block_count, block_time
+    s[S_DRIFT_J], s[S_DRIFT_J + 1], s[S_DRIFT_J + 2] = j0, j1, j2
+    s[S_DRIFT_J + 3], s[S_DRIFT_J + 4], s[S_DRIFT_J + 5] = j3, j4, j5
+    s[S_DRIFT_J_LP], s[S_DRIFT_J_LP + 1], s[S_DRIFT_J_LP + 2] = jl0, jl1, jl2
+    s[S_DRIFT_J_LP + 3], s[S_DRIFT_J_LP + 4], s[S_DRIFT_J_LP + 5] = jl3, jl4, jl5
+    s[S_DRIFT_J_LP_STATE], s[S_DRIFT_J_LP_STATE + 1] = jm00, jm01
+    s[S_DRIFT_J_LP_STATE + 2], s[S_DRIFT_J_LP_STATE + 3] = jm10, jm11
+    s[S_DRIFT_J_LP_STATE + 4], s[S_DRIFT_J_LP_STATE + 5] = jm20, jm21
+    s[S_DRIFT_J_LP_STATE + 6], s[S_DRIFT_J_LP_STATE + 7] = jm30, jm31
+    s[S_DRIFT_J_LP_STATE + 8], s[S_DRIFT_J_LP_STATE + 9] = jm40, jm41
+    s[S_DRIFT_J_LP_STATE + 10], s[S_DRIFT_J_LP_STATE + 11] = jm50, jm51
+    s[S_DRIFT_G], s[S_DRIFT_G + 1] = g0, g1
+    s[S_DRIFT_G_LP], s[S_DRIFT_G_LP + 1] = gl0, gl1
+    s[S_DRIFT_G_LP_STATE], s[S_DRIFT_G_LP_STATE + 1] = gm00, gm01
+    s[S_DRIFT_G_LP_STATE + 2], s[S_DRIFT_G_LP_STATE + 3] = gm10, gm11

@@ -39,6 +39,12 @@ from mocapkit.imu.filters.polaris_engine import (
     start,
     strapdown,
 )
+from mocapkit.imu.filters.polaris_offline_kernels import (
+    heading_fusion_kernel,
+    inclination_kernel,
+    smoothed_strapdown_kernel,
+    zero_phase_kernel,
+)
 from mocapkit.imu.filters.polaris_params import PolarisCore, PolarisParams, butterworth2
 
 _UP = np.array([0.0, 0.0, 1.0])
@@ -151,6 +157,33 @@ def smooth(
         np.ascontiguousarray(use_mag[::-1]),
         has_mag,
     )
+    if backend == "fast":
+        return _tail_fast(
+            params, c, gyr, acc, mag, dt, dt_b, use_acc, use_mag, has_mag, aux_f, aux_b
+        )
+    return _tail_numpy(
+        params, c, backend, gyr, acc, mag, dt, dt_b, use_acc, use_mag, has_mag, aux_f, aux_b
+    )
+
+
+def _tail_numpy(
+    params: PolarisParams,
+    c: FloatArray,
+    backend: str,
+    gyr: FloatArray,
+    acc: FloatArray,
+    mag: FloatArray,
+    dt: FloatArray,
+    dt_b: FloatArray,
+    use_acc: np.ndarray,
+    use_mag: np.ndarray,
+    has_mag: bool,
+    aux_f: FloatArray,
+    aux_b: FloatArray,
+) -> OfflineResult:
+    """(O3)-(O5) in numpy from the forward aux ``aux_f`` and the time-reversed backward
+    aux ``aux_b`` (N, 8) (the reference backend's path)."""
+    n = gyr.shape[0]
     aux_b = aux_b[::-1]
     # (O3) smoothed bias (the backward pass estimates -b).
     var_f = aux_f[:, 7:8]
@@ -159,25 +192,13 @@ def smooth(
     # (O4) zero-phase inclination in the smoothed strapdown frame.
     q_IS = strapdown(backend, gyr, bias, dt)
     a_I = _fill_unusable(quat_rotate(q_IS, acc), use_acc)
-    a_I_lp = _zero_phase_lowpass(params, a_I)
-    q_EI = quat_from_two_vectors(a_I_lp, np.broadcast_to(_UP, a_I_lp.shape))
-    q6 = quat_mul(q_EI, q_IS)
+    q6 = _inclination(a_I, q_IS, params)
     if not has_mag:
         return OfflineResult(q6, None, bias)
     # (O5) heading: the heading filter forward and backward over the smoothed 6D
     # orientation, fused by the variances of its heading offset.
-    rate = gyr - bias
-    rate2 = np.einsum("ij,ij->i", rate, rate)
-    fwd = heading_pass(c, backend, q6, mag, rate2, dt, use_mag)
-    bwd = heading_pass(
-        c,
-        backend,
-        np.ascontiguousarray(q6[::-1]),
-        np.ascontiguousarray(mag[::-1]),
-        np.ascontiguousarray(rate2[::-1]),
-        np.ascontiguousarray(dt_b),
-        np.ascontiguousarray(use_mag[::-1]),
-    )[::-1]
+    fwd, bwd = _heading_passes(c, backend, q6, mag, _rate2(gyr, bias), dt, dt_b, use_mag)
+    bwd = bwd[::-1]
     var_f, var_b = fwd[:, 1], bwd[:, 1]
     ready_f = var_f > 0.0  # the heading filter has started in that direction
     ready_b = var_b > 0.0
@@ -187,4 +208,80 @@ def smooth(
     weight[~ready_f & ready_b] = 1.0
     diff = np.arctan2(np.sin(bwd[:, 0] - fwd[:, 0]), np.cos(bwd[:, 0] - fwd[:, 0]))
     q9 = quat_mul(_heading_rotation(fwd[:, 0] + weight * diff), q6)
+    return OfflineResult(q6, q9, bias)
+
+
+def _inclination(a_I: FloatArray, q_IS: FloatArray, params: PolarisParams) -> FloatArray:
+    """(O4) ``q6`` (N, 4): the zero-phase low-passed ``a_I`` brought onto up, times ``q_IS``."""
+    a_I_lp = _zero_phase_lowpass(params, a_I)
+    q_EI = quat_from_two_vectors(a_I_lp, np.broadcast_to(_UP, a_I_lp.shape))
+    return quat_mul(q_EI, q_IS)
+
+
+def _rate2(gyr: FloatArray, bias: FloatArray) -> FloatArray:
+    """Squared bias-corrected angular rates [rad^2/s^2] (N,)."""
+    rate = gyr - bias
+    return np.einsum("ij,ij->i", rate, rate)
+
+
+def _heading_passes(
+    c: FloatArray,
+    backend: str,
+    q6: FloatArray,
+    mag: FloatArray,
+    rate2: FloatArray,
+    dt: FloatArray,
+    dt_b: FloatArray,
+    use_mag: np.ndarray,
+) -> tuple[FloatArray, FloatArray]:
+    """(O5) the heading filter forward, and backward (its output time-reversed: index 0 is
+    the last sample), each (N, 2) ``[delta, var]``."""
+    fwd = heading_pass(c, backend, q6, mag, rate2, dt, use_mag)
+    bwd = heading_pass(
+        c,
+        backend,
+        np.ascontiguousarray(q6[::-1]),
+        np.ascontiguousarray(mag[::-1]),
+        np.ascontiguousarray(rate2[::-1]),
+        np.ascontiguousarray(dt_b),
+        np.ascontiguousarray(use_mag[::-1]),
+    )
+    return fwd, bwd
+
+
+def _tail_fast(
+    params: PolarisParams,
+    c: FloatArray,
+    gyr: FloatArray,
+    acc: FloatArray,
+    mag: FloatArray,
+    dt: FloatArray,
+    dt_b: FloatArray,
+    use_acc: np.ndarray,
+    use_mag: np.ndarray,
+    has_mag: bool,
+    aux_f: FloatArray,
+    aux_b: FloatArray,
+) -> OfflineResult:
+    """(O3)-(O5) with the numba kernels of
+    :mod:`mocapkit.imu.filters.polaris_offline_kernels` (the same arithmetic as the numpy
+    steps of :func:`smooth`, fused into a few passes); ``aux_b`` time-reversed."""
+    n = gyr.shape[0]
+    bias = np.empty((n, 3))
+    q_IS = np.empty((n, 4))
+    a_I = np.empty((n, 3))
+    smoothed_strapdown_kernel(gyr, acc, dt, aux_f, aux_b, bias, q_IS, a_I)
+    a_I = np.ascontiguousarray(_fill_unusable(a_I, use_acc))
+    a_I_lp = np.empty_like(a_I)
+    zero_phase_kernel(a_I, *butterworth2(params.offline_tau_acc, params.dt), a_I_lp)
+    q6 = np.empty((n, 4))
+    if not inclination_kernel(a_I_lp, q_IS, q6):  # antiparallel or broken: numpy handles it
+        q6 = quat_mul(quat_from_two_vectors(a_I_lp, np.broadcast_to(_UP, a_I_lp.shape)), q_IS)
+    if not has_mag:
+        return OfflineResult(q6, None, bias)
+    fwd, bwd = _heading_passes(c, "fast", q6, mag, _rate2(gyr, bias), dt, dt_b, use_mag)
+    gap = bwd[::-1, 0] - fwd[:, 0]
+    diff = np.arctan2(np.sin(gap), np.cos(gap))
+    q9 = np.empty((n, 4))
+    heading_fusion_kernel(q6, fwd, bwd, diff, q9)
     return OfflineResult(q6, q9, bias)

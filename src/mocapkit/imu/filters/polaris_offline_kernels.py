@@ -97,3 +97,134 @@ def heading_kernel(
             s[S_BLOCK_TIME] = 0.0
         out[k, 0] = s[S_MAG_X]
         out[k, 1] = s[S_MAG_P] if s[S_MAG_READY] != 0.0 else 0.0
+
+
+@njit(cache=True)
+def smoothed_strapdown_kernel(
+    gyr: np.ndarray,
+    acc: np.ndarray,
+    dt: np.ndarray,
+    aux_f: np.ndarray,
+    aux_b: np.ndarray,
+    bias: np.ndarray,
+    q_IS: np.ndarray,
+    acc_I: np.ndarray,
+) -> None:
+    """(O3) and (O4) in one pass: the smoothed bias ``bias`` (N, 3) from the forward aux
+    ``aux_f`` and the *time-reversed* backward aux ``aux_b`` (N, 8), the strapdown
+    ``q_IS`` (N, 4) with it (:func:`strapdown_kernel`'s arithmetic) and the accelerometer
+    in I, ``acc_I`` (N, 3) (``geometry.quat_rotate``'s arithmetic)."""
+    n = gyr.shape[0]
+    w, x, y, z = 1.0, 0.0, 0.0, 0.0
+    for k in range(n):
+        var_f = aux_f[k, 7]
+        var_b = aux_b[n - 1 - k, 7]
+        for i in range(3):
+            bias[k, i] = (aux_f[k, 4 + i] * var_b - aux_b[n - 1 - k, 4 + i] * var_f) / (
+                var_f + var_b
+            )
+        wx = (gyr[k, 0] - bias[k, 0]) * dt[k]
+        wy = (gyr[k, 1] - bias[k, 1]) * dt[k]
+        wz = (gyr[k, 2] - bias[k, 2]) * dt[k]
+        angle = math.sqrt(wx * wx + wy * wy + wz * wz)
+        if angle <= 1e-15:
+            dw, dx, dy, dz = 1.0, 0.0, 0.0, 0.0
+        else:
+            sh = math.sin(0.5 * angle) / angle
+            dw, dx, dy, dz = math.cos(0.5 * angle), sh * wx, sh * wy, sh * wz
+        w, x, y, z = qmul(w, x, y, z, dw, dx, dy, dz)
+        nq = math.sqrt(w * w + x * x + y * y + z * z)
+        w, x, y, z = w / nq, x / nq, y / nq, z / nq
+        q_IS[k, 0], q_IS[k, 1], q_IS[k, 2], q_IS[k, 3] = w, x, y, z
+        # v + w t + u x t with t = 2 u x v
+        v0, v1, v2 = acc[k, 0], acc[k, 1], acc[k, 2]
+        t0 = 2.0 * (y * v2 - z * v1)
+        t1 = 2.0 * (z * v0 - x * v2)
+        t2 = 2.0 * (x * v1 - y * v0)
+        acc_I[k, 0] = v0 + w * t0 + (y * t2 - z * t1)
+        acc_I[k, 1] = v1 + w * t1 + (z * t0 - x * t2)
+        acc_I[k, 2] = v2 + w * t2 + (x * t1 - y * t0)
+
+
+@njit(cache=True)
+def zero_phase_kernel(
+    x: np.ndarray, b0: float, b1: float, b2: float, a1: float, a2: float, out: np.ndarray
+) -> None:
+    """The Butterworth ``(b0, b1, b2, 1, a1, a2)`` over each column of ``x`` (N, 3) forward,
+    then backward over the result, each started at steady state (``out`` (N, 3)); the
+    arithmetic of ``scipy.signal.lfilter`` (transposed direct form II) with
+    ``zi = [b1 - a1 + b2 - a2, b2 - a2] * first``."""
+    n = x.shape[0]
+    if n == 0:
+        return
+    u0 = b1 - a1 + b2 - a2
+    u1 = b2 - a2
+    for j in range(x.shape[1]):
+        z0, z1 = u0 * x[0, j], u1 * x[0, j]
+        for k in range(n):
+            v = x[k, j]
+            yk = z0 + b0 * v
+            z0 = z1 + v * b1 - yk * a1
+            z1 = v * b2 - yk * a2
+            out[k, j] = yk
+        z0, z1 = u0 * out[n - 1, j], u1 * out[n - 1, j]
+        for k in range(n - 1, -1, -1):
+            v = out[k, j]
+            yk = z0 + b0 * v
+            z0 = z1 + v * b1 - yk * a1
+            z1 = v * b2 - yk * a2
+            out[k, j] = yk
+
+
+@njit(cache=True)
+def inclination_kernel(acc_lp: np.ndarray, q_IS: np.ndarray, q6: np.ndarray) -> bool:
+    """``q6 = q_from_two_vectors(acc_lp, up) * q_IS`` (N, 4) with the arithmetic of
+    ``geometry.quat_from_two_vectors`` and ``quat_mul``; False (``q6`` incomplete) when a
+    vector is zero, points down (the antiparallel case) or the result is not finite, for
+    the numpy path to handle."""
+    v0, v1, v2 = 0.0, 0.0, 1.0  # up
+    for k in range(acc_lp.shape[0]):
+        a0, a1, a2 = acc_lp[k, 0], acc_lp[k, 1], acc_lp[k, 2]
+        na = math.sqrt(a0 * a0 + a1 * a1 + a2 * a2)
+        if not na > 0.0:
+            return False
+        a0, a1, a2 = a0 / na, a1 / na, a2 / na
+        d = a0 * v0 + a1 * v1 + a2 * v2
+        w = 1.0 + d
+        if w < 1e-12:
+            return False
+        x = a1 * v2 - a2 * v1
+        y = a2 * v0 - a0 * v2
+        z = a0 * v1 - a1 * v0
+        nq = math.sqrt(w * w + x * x + y * y + z * z)
+        if not (nq > 0.0 and math.isfinite(nq)):
+            return False
+        w, x, y, z = w / nq, x / nq, y / nq, z / nq
+        q0, q1, q2, q3 = qmul(w, x, y, z, q_IS[k, 0], q_IS[k, 1], q_IS[k, 2], q_IS[k, 3])
+        q6[k, 0], q6[k, 1], q6[k, 2], q6[k, 3] = q0, q1, q2, q3
+    return True
+
+
+@njit(cache=True)
+def heading_fusion_kernel(
+    q6: np.ndarray, fwd: np.ndarray, bwd: np.ndarray, diff: np.ndarray, q9: np.ndarray
+) -> None:
+    """(O5) ``q9 = Rz(psi) * q6`` (N, 4), ``psi`` the forward heading offset ``fwd``
+    (N, 2) and the *time-reversed* backward one ``bwd`` fused by their variances (a
+    direction whose filter has not started yet, variance 0, gets no weight); ``diff`` (N,)
+    is backward minus forward wrapped to [-pi, pi] (numpy's ``arctan2``, which differs
+    from the C library's in the last bit for some arguments)."""
+    n = q6.shape[0]
+    for k in range(n):
+        f, var_f = fwd[k, 0], fwd[k, 1]
+        var_b = bwd[n - 1 - k, 1]
+        weight = 0.0
+        if var_f > 0.0 and var_b > 0.0:
+            weight = var_f / (var_f + var_b)
+        elif var_b > 0.0:
+            weight = 1.0
+        half = 0.5 * (f + weight * diff[k])
+        h0, h1, h2, h3 = qmul(
+            math.cos(half), 0.0, 0.0, math.sin(half), q6[k, 0], q6[k, 1], q6[k, 2], q6[k, 3]
+        )
+        q9[k, 0], q9[k, 1], q9[k, 2], q9[k, 3] = h0, h1, h2, h3
