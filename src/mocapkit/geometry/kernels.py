@@ -11,6 +11,8 @@ its callers (``make clean`` does), or they may keep the old code (docs/architect
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -93,3 +95,20 @@ def rotation_matrix_into(w: float, x: float, y: float, z: float, R: np.ndarray) 
     R[0, 0], R[0, 1], R[0, 2] = r[0], r[1], r[2]
     R[1, 0], R[1, 1], R[1, 2] = r[3], r[4], r[5]
     R[2, 0], R[2, 1], R[2, 2] = r[6], r[7], r[8]
+
+
+@njit(cache=True, inline="always")
+def strapdown_step(
+    w: float, x: float, y: float, z: float, wx: float, wy: float, wz: float
+) -> tuple[float, float, float, float]:
+    """``normalise(q * exp(r / 2))`` for the rotation vector ``r = (wx, wy, wz)`` [rad]
+    (one gyroscope step ``omega dt`` in the sensor frame), ``q = (w, x, y, z)``."""
+    angle = math.sqrt(wx * wx + wy * wy + wz * wz)
+    if angle <= 1e-15:
+        dw, dx, dy, dz = 1.0, 0.0, 0.0, 0.0
+    else:
+        sh = math.sin(0.5 * angle) / angle
+        dw, dx, dy, dz = math.cos(0.5 * angle), sh * wx, sh * wy, sh * wz
+    w, x, y, z = qmul(w, x, y, z, dw, dx, dy, dz)
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    return w / n, x / n, y / n, z / n

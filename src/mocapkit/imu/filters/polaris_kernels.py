@@ -13,7 +13,7 @@ import math
 import numpy as np
 from numba import njit
 
-from mocapkit.geometry.kernels import qmul, rotation_matrix, rotation_matrix_into
+from mocapkit.geometry.kernels import qmul, rotation_matrix, rotation_matrix_into, strapdown_step
 from mocapkit.imu.filters.polaris_heading_kernels import heading_update, start_heading
 from mocapkit.imu.filters.polaris_params import (
     C_A1,
@@ -365,15 +365,7 @@ def polaris_kernel(
         # (P1) strapdown.
         rx, ry, rz = gx - bx, gy - by, gz - bz
         wx, wy, wz = rx * step, ry * step, rz * step
-        angle = math.sqrt(wx * wx + wy * wy + wz * wz)
-        if angle <= 1e-15:
-            dw, dx, dy, dz = 1.0, 0.0, 0.0, 0.0
-        else:
-            sh = math.sin(0.5 * angle) / angle
-            dw, dx, dy, dz = math.cos(0.5 * angle), sh * wx, sh * wy, sh * wz
-        w, x, y, z = qmul(w, x, y, z, dw, dx, dy, dz)
-        n = math.sqrt(w * w + x * x + y * y + z * z)
-        w, x, y, z = w / n, x / n, y / n, z / n
+        w, x, y, z = strapdown_step(w, x, y, z, wx, wy, wz)
         h = S_HISTORY + 4 * pos
         s[h], s[h + 1], s[h + 2], s[h + 3] = w, x, y, z
         pos_now = pos

@@ -13,7 +13,7 @@ import math
 import numpy as np
 from numba import njit
 
-from mocapkit.geometry.kernels import qmul, rotation_matrix_into
+from mocapkit.geometry.kernels import qmul, rotation_matrix_into, strapdown_step
 from mocapkit.imu.filters.polaris_heading_kernels import heading_update, start_heading
 from mocapkit.imu.filters.polaris_params import (
     C_BLOCK,
@@ -39,15 +39,7 @@ def strapdown_kernel(gyr: np.ndarray, bias: np.ndarray, dt: np.ndarray, out: np.
         wx = (gyr[k, 0] - bias[k, 0]) * dt[k]
         wy = (gyr[k, 1] - bias[k, 1]) * dt[k]
         wz = (gyr[k, 2] - bias[k, 2]) * dt[k]
-        angle = math.sqrt(wx * wx + wy * wy + wz * wz)
-        if angle <= 1e-15:
-            dw, dx, dy, dz = 1.0, 0.0, 0.0, 0.0
-        else:
-            sh = math.sin(0.5 * angle) / angle
-            dw, dx, dy, dz = math.cos(0.5 * angle), sh * wx, sh * wy, sh * wz
-        w, x, y, z = qmul(w, x, y, z, dw, dx, dy, dz)
-        n = math.sqrt(w * w + x * x + y * y + z * z)
-        w, x, y, z = w / n, x / n, y / n, z / n
+        w, x, y, z = strapdown_step(w, x, y, z, wx, wy, wz)
         out[k, 0], out[k, 1], out[k, 2], out[k, 3] = w, x, y, z
 
 
@@ -126,15 +118,7 @@ def smoothed_strapdown_kernel(
         wx = (gyr[k, 0] - bias[k, 0]) * dt[k]
         wy = (gyr[k, 1] - bias[k, 1]) * dt[k]
         wz = (gyr[k, 2] - bias[k, 2]) * dt[k]
-        angle = math.sqrt(wx * wx + wy * wy + wz * wz)
-        if angle <= 1e-15:
-            dw, dx, dy, dz = 1.0, 0.0, 0.0, 0.0
-        else:
-            sh = math.sin(0.5 * angle) / angle
-            dw, dx, dy, dz = math.cos(0.5 * angle), sh * wx, sh * wy, sh * wz
-        w, x, y, z = qmul(w, x, y, z, dw, dx, dy, dz)
-        nq = math.sqrt(w * w + x * x + y * y + z * z)
-        w, x, y, z = w / nq, x / nq, y / nq, z / nq
+        w, x, y, z = strapdown_step(w, x, y, z, wx, wy, wz)
         q_IS[k, 0], q_IS[k, 1], q_IS[k, 2], q_IS[k, 3] = w, x, y, z
         # v + w t + u x t with t = 2 u x v
         v0, v1, v2 = acc[k, 0], acc[k, 1], acc[k, 2]
