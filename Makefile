@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 BENCH_STAMP := $(VENV)/.installed-bench
 PYTEST_WORKERS ?= 2
 
-.PHONY: setup demo test lint typecheck pytest bench clean
+.PHONY: setup setup-bench demo test lint typecheck pytest bench clean
 
 setup: $(STAMP)
 
@@ -18,6 +18,10 @@ $(STAMP): pyproject.toml
 	@echo "compiling the numba kernels once (about a minute on 2 cores)"
 	$(BIN)/mocapkit demo --warm-up
 	@touch $(STAMP)
+
+# The peers (vqf, imufusion, ahrs, opensim): benchmarks and the round-trip tests that run
+# them. CI installs them (.ci/run); on a user's machine those tests skip without them.
+setup-bench: $(BENCH_STAMP)
 
 $(BENCH_STAMP): $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[dev,viz,robots,bench]'

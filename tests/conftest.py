@@ -41,3 +41,22 @@ def shared_data() -> Path:
     if SHARED_DATA is None:
         pytest.skip("../shared/data is not present (set MOCAPKIT_SHARED_DATA to its path)")
     return SHARED_DATA
+
+
+def require_peer(module: str, extra: str = "bench") -> object:
+    """Import a peer library (opensim, vqf, ezc3d's tools...) for a test that runs it.
+
+    On a user's machine a missing peer skips the test with the install hint. In CI
+    (`MOCAPKIT_REQUIRE_PEERS=1`, set by `.ci/run`, which installs the `bench` extra) a
+    missing peer is a failure: a round-trip test that silently skipped there would prove
+    nothing.
+    """
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        hint = f"needs {module} (pip install -e '.[{extra}]')"
+        if os.environ.get("MOCAPKIT_REQUIRE_PEERS") == "1":
+            pytest.fail(f"{hint}; MOCAPKIT_REQUIRE_PEERS=1 requires it: {exc}")
+        pytest.skip(hint)
