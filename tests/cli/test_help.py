@@ -21,7 +21,7 @@ def _commands(
     return out
 
 
-COMMANDS = _commands(build_parser())
+COMMANDS = _commands(build_parser(every=True))
 
 
 def test_the_walk_finds_every_command_group() -> None:
@@ -50,3 +50,35 @@ def test_top_level_help_documents_the_exit_codes(capsys: pytest.CaptureFixture[s
 def test_usage_errors_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["demo", "--no-such-flag"]) == 2
     assert "unrecognized arguments" in capsys.readouterr().err
+
+
+def test_placeholder_help_lines_equal_the_modules_own() -> None:
+    """main() registers only the named command; the others show main.py's copy of their
+    help line, which must stay equal to the module's."""
+    full = build_parser(every=True)
+    lazy = build_parser()
+    (full_sub,) = [a for a in full._actions if isinstance(a, argparse._SubParsersAction)]
+    (lazy_sub,) = [a for a in lazy._actions if isinstance(a, argparse._SubParsersAction)]
+    full_help = {c.dest: c.help for c in full_sub._choices_actions}
+    lazy_help = {c.dest: c.help for c in lazy_sub._choices_actions}
+    assert lazy_help == full_help
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["markers", "--help"], ["imu", "--help"]])
+def test_help_imports_no_heavy_package(argv: list[str]) -> None:
+    """`mocapkit --help` and a command's help load none of the heavy packages (a module
+    check in a fresh interpreter, not a timing)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from mocapkit.cli.main import main\n"
+        f"main({argv!r})\n"
+        "heavy = ('numba', 'scipy', 'matplotlib', 'pinocchio', 'rich', 'h5py', 'ezc3d')\n"
+        "print(sorted(m for m in heavy if m in sys.modules))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout
+    assert out.strip().splitlines()[-1] == "[]", out

@@ -203,3 +203,9 @@ def test_empty_batch(name: str) -> None:
     f = make_filter(name, RATE)
     assert f.run(np.zeros((0, 3)), np.zeros((0, 3))).shape == (0, 4)
     assert not f.initialised
+
+
+def test_the_cli_list_of_filter_names_equals_the_registry() -> None:
+    from mocapkit.imu.filter_names import BUILTIN_FILTERS
+
+    assert sorted(BUILTIN_FILTERS) == sorted(FILTERS)

@@ -332,7 +332,7 @@ def load_markerset(name_or_path: str | Path) -> MarkerSet:
         folder = resources.files(PRESET_PACKAGE).joinpath("markersets")
         text = folder.joinpath(f"{name_or_path}.yaml").read_text()
     try:
-        doc = yaml.safe_load(text)
+        doc = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
     except yaml.YAMLError as exc:
         raise FileFormatError(f"{where}: invalid YAML ({exc})") from exc
     return markerset_from_dict(doc, where)

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
+import time
 from collections.abc import Iterable, Iterator
 from typing import Any, TypeVar
 
@@ -17,6 +19,23 @@ EXIT_MISSING_DEPENDENCY = 3  # an optional package is not installed
 EXIT_INTERRUPTED = 130  # Ctrl-C
 
 T = TypeVar("T")
+
+_IMPORTED_AT = time.perf_counter()
+
+
+def process_seconds() -> float:
+    """Seconds since this process started, as a user's stopwatch sees a command: read from
+    the kernel on Linux (``/proc/self/stat`` start time, 10 ms ticks), else since this
+    module was imported (interpreter start-up left out)."""
+    try:
+        with open("/proc/self/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        start_ticks = float(fields[19])  # field 22 of proc(5): starttime
+        with open("/proc/uptime") as f:
+            uptime = float(f.read().split()[0])
+        return max(0.0, uptime - start_ticks / os.sysconf("SC_CLK_TCK"))
+    except (OSError, ValueError, IndexError):
+        return time.perf_counter() - _IMPORTED_AT
 
 
 def _to_jsonable(value: Any) -> Any:

@@ -128,8 +128,8 @@ def _print_text(s: dict[str, Any]) -> None:
             if method in m:
                 f = m[method]
                 out.write(
-                    f"  {method}: {f['frames']} frames at {f['fps']:.0f} frames/s, marker RMS "
-                    f"{f['marker_rms_mm']:.1f} mm (max {f['marker_max_mm']:.1f} mm)\n"
+                    f"  {method}: {f['frames']} frames, solved at {f['solve_fps']:.0f} frames/s, "
+                    f"marker RMS {f['marker_rms_mm']:.1f} mm (max {f['marker_max_mm']:.1f} mm)\n"
                 )
     if "imu" in s:
         out.write("\norientation filters on BROAD trial 07 (crop), RMSE [deg]\n")

@@ -27,9 +27,9 @@ def _param(text: str) -> tuple[str, float]:
 
 
 def _filter_names() -> list[str]:
-    from mocapkit.imu.filters import available_filters
+    from mocapkit.imu.filter_names import BUILTIN_FILTERS
 
-    return available_filters()
+    return list(BUILTIN_FILTERS)
 
 
 _EXAMPLES = """\

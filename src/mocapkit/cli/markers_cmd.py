@@ -8,7 +8,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from mocapkit.cli.common import EXIT_OK, print_json
+from mocapkit.cli.common import EXIT_OK, print_json, process_seconds
 from mocapkit.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -102,6 +102,13 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         default="fast",
         help="fast (numba) or reference (Pinocchio + numpy)",
     )
+    p.add_argument(
+        "--total-bound",
+        action="store_true",
+        help="also compute the joint-error bound that holds (distance to the markers' "
+        "best fit plus 4 standard deviations of marker noise; a fit per frame). Eq. 15's "
+        "bound is always computed",
+    )
 
 
 _GAIT = "../shared/data/opensim/gait2392"
@@ -155,8 +162,9 @@ def register(subparsers: Any) -> None:
     rec.add_argument(
         "--json",
         action="store_true",
-        help='print {"frames", "fps", "marker_rms_mm", "marker_max_mm", '
-        '"joint_error_bound_deg_max"}',
+        help='print {"frames", "solve_fps", "marker_rms_mm", "marker_max_mm", '
+        '"joint_error_bound_deg_max", "fps", "seconds"}: fps and seconds of the whole '
+        "command (start to files written), solve_fps of the reconstruction loop alone",
     )
     rec.set_defaults(func=_reconstruct)
     rep = sub.add_parser(
@@ -204,6 +212,7 @@ def _run(args: argparse.Namespace) -> Any:
         method=args.method, mode=args.mode, grouping=args.grouping, units=args.units,
         up_axis=args.up_axis, fill_gaps=args.fill_gaps, max_gap_s=args.max_gap_s,
         lowpass_hz=args.lowpass_hz, start_s=args.start_s, end_s=args.end_s,
+        total_bound=args.total_bound or args.func is _report,
         osc=OSCParams(substeps=args.substeps, backend=args.backend),
         ik=IKParams(backend=args.backend),
     )  # fmt: skip
@@ -224,12 +233,16 @@ def _reconstruct(args: argparse.Namespace) -> int:
         result.write_csv(args.output)
     if args.tracked_trc is not None:
         result.write_tracked_trc(args.tracked_trc)
+    m = result.metrics()
+    seconds = process_seconds()
+    m["fps"] = round(m["frames"] / seconds, 1) if seconds > 0 else None
+    m["seconds"] = round(seconds, 3)
     if args.json:
-        print_json(result.metrics())
+        print_json(m)
     else:
-        m = result.metrics()
         print(
-            f"{m['frames']} frames at {m['fps']} frames/s; marker RMS {m['marker_rms_mm']} mm "
+            f"{m['frames']} frames in {m['seconds']} s ({m['fps']} frames/s end to end, "
+            f"{m['solve_fps']} in the solve); marker RMS {m['marker_rms_mm']} mm "
             f"(max {m['marker_max_mm']} mm); joint error bound max "
             f"{m['joint_error_bound_deg_max']} deg -> {args.output}"
         )

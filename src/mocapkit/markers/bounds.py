@@ -95,29 +95,55 @@ def joint_error_bounds(
     return out
 
 
+def _perturbed(Q: FloatArray, nv: int, eps: float) -> FloatArray:
+    """(N, 2 nv, nq): each configuration moved by +eps then -eps along each velocity
+    coordinate (the free-flyer's local twist as ``pin.integrate`` moves it: a translation
+    along the pelvis axes, a rotation about them; the joints additively)."""
+    out = np.repeat(Q[:, None, :], 2 * nv, axis=1)
+    x, y, z, w = Q[:, 3], Q[:, 4], Q[:, 5], Q[:, 6]
+    # pelvis axes in the world (columns of R from the xyzw quaternion)
+    axes = np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)], 1),
+            np.stack([2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x)], 1),
+            np.stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)], 1),
+        ],
+        axis=1,
+    )  # (N, 3 axes, 3)
+    c, s = np.cos(eps / 2), np.sin(eps / 2)
+    for sign, base in ((1.0, 0), (-1.0, nv)):
+        for k in range(3):
+            out[:, base + k, :3] += sign * eps * axes[:, k]
+            # q (x) [c, sign s e_k] in xyzw
+            e = np.zeros(3)
+            e[k] = sign * s
+            out[:, base + 3 + k, 3] = w * e[0] + x * c + y * e[2] - z * e[1]
+            out[:, base + 3 + k, 4] = w * e[1] - x * e[2] + y * c + z * e[0]
+            out[:, base + 3 + k, 5] = w * e[2] + x * e[1] - y * e[0] + z * c
+            out[:, base + 3 + k, 6] = w * c - x * e[0] - y * e[1] - z * e[2]
+        for k in range(6, nv):
+            out[:, base + k, k + 1] += sign * eps
+    return out
+
+
 def coordinate_jacobian(human: HumanModel, cmap: CoordinateMap, Q: FloatArray) -> FloatArray:
     """(N, K, nv) derivative of the reported coordinates (:mod:`mocapkit.markers.coordinates`)
     with respect to the model's velocity coordinates, by central differences (step 1e-6:
-    the coordinates are smooth away from gimbal lock, where the derivative is rightly huge)."""
-    from mocapkit.markers.kinematics import integrate
-
+    the coordinates are smooth away from gimbal lock, where the derivative is rightly huge).
+    All perturbed configurations of a block of frames go through one vectorised call."""
     eps = 1e-6
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
     n, nv = Q.shape[0], human.nv
     G = np.zeros((n, len(cmap.names), nv))
-    for k in range(nv):
-        if k >= 6:
-            up, down = Q.copy(), Q.copy()
-            up[:, k + 1] += eps
-            down[:, k + 1] -= eps
-        else:
-            dv = np.zeros(nv)
-            dv[k] = eps
-            up = np.array([integrate(human.model, q, dv) for q in Q])
-            down = np.array([integrate(human.model, q, -dv) for q in Q])
-        d = coordinates_from_q(human, up, cmap) - coordinates_from_q(human, down, cmap)
-        ang = cmap.angular
-        d[:, ang] = np.pi - np.mod(np.pi - d[:, ang], 2.0 * np.pi)  # across the +-pi seam
-        G[:, :, k] = d / (2.0 * eps)
+    block = max(1, 4096 // (2 * nv))  # frames per call: ~4k configurations
+    ang = cmap.angular
+    for a in range(0, n, block):
+        b = min(n, a + block)
+        P = _perturbed(Q[a:b], nv, eps).reshape(-1, Q.shape[1])
+        C = coordinates_from_q(human, P, cmap).reshape(b - a, 2 * nv, -1)
+        d = C[:, :nv] - C[:, nv:]  # (B, nv, K)
+        d[..., ang] = np.pi - np.mod(np.pi - d[..., ang], 2.0 * np.pi)  # across the +-pi seam
+        G[a:b] = np.swapaxes(d, 1, 2) / (2.0 * eps)
     return G
 
 
@@ -140,7 +166,8 @@ class BoundReport:
             numerically undetermined; ``dc`` is NaN there.
         total: (N, K) the bound that holds, |distance to the markers' best fit| plus what
             the markers' noise can move that fit (:mod:`mocapkit.markers.bound_fit`), capped
-            like ``dc``; NaN where undetermined or without redundancy to estimate the noise.
+            like ``dc``; NaN where undetermined or without redundancy to estimate the noise;
+            None when not requested (``with_total=False``).
     """
 
     dq: FloatArray
@@ -149,7 +176,7 @@ class BoundReport:
     sensitivity_deg_per_mm: FloatArray
     poorly_determined: dict[str, int]
     unobserved: np.ndarray
-    total: FloatArray
+    total: FloatArray | None
 
     @property
     def worst_sensitivity_deg_per_mm(self) -> FloatArray:
@@ -171,13 +198,24 @@ def sensitivities(
     free: np.ndarray,
     G: FloatArray,
     rows: np.ndarray,
+    backend: str = "fast",
 ) -> FloatArray:
     """(N, K) ``sqrt(g_kᵀ (Jᵀ W J)⁻¹ g_k)`` [rad/m] for the coordinates ``rows`` (N, K) bool,
     J over the model velocity columns ``free`` (N, nv) bool of each frame (the determined,
     not held ones), g_k the coordinate's gradient (G: (N, K, nv)); NaN outside ``rows``, inf
-    when g_k reaches a direction the markers do not see."""
+    when g_k reaches a direction the markers do not see. ``backend``: "fast" (numba,
+    :mod:`mocapkit.markers.bound_kernels`) or "reference" (this function's numpy loop)."""
     kin = MarkerKinematics(human, names)
     fm = rigid_fast.flatten(human.model, kin.frame_ids)
+    if backend == "fast":
+        from mocapkit.markers.bound_kernels import sensitivities_kernel
+
+        return sensitivities_kernel(
+            fm.parent, fm.R0, fm.p0, fm.axis, fm.marker_joint, fm.marker_offset,
+            np.ascontiguousarray(Q, dtype=float), np.ascontiguousarray(X, dtype=float),
+            np.ascontiguousarray(weights, dtype=float), np.ascontiguousarray(free),
+            np.ascontiguousarray(G), np.ascontiguousarray(rows),
+        )  # fmt: skip
     sw = np.sqrt(np.maximum(weights, 0.0))
     out = np.full(rows.shape, np.nan)
     for f, q in enumerate(Q):
@@ -212,10 +250,13 @@ def bound_report(
     dofs: np.ndarray,
     held: Sequence[str] = (),
     columns: np.ndarray | None = None,
+    with_total: bool = True,
 ) -> BoundReport:
     """Apply rules 1-3 of the module docstring to a method's raw Δq (N, nv): ``root``,
     ``dofs`` from :func:`mocapkit.markers.determined.dof_determined`, ``held`` the
-    coordinate tasks' DOFs, ``columns`` (N, K) the determined reported coordinates."""
+    coordinate tasks' DOFs, ``columns`` (N, K) the determined reported coordinates;
+    ``with_total``: also the bound that holds (:mod:`mocapkit.markers.bound_fit`: a fit per
+    frame, the costlier part; the CLI computes it on request, ``--total-bound``)."""
     out = np.array(dq, dtype=float, copy=True)
     out[~root, :6] = np.nan
     out[:, 6:][~dofs] = np.nan
@@ -255,6 +296,8 @@ def bound_report(
     with np.errstate(invalid="ignore"):
         poor = (sens > POORLY_DETERMINED_DEG_PER_MM) & ~unobserved
     counts = {c: int(poor[:, k].sum()) for k, c in enumerate(cmap.names) if poor[:, k].any()}
-    total = total_bound(human, cmap, names, Q, X, weights, free, rows & ~unobserved)
-    total = np.minimum(total, cspan[None, :])
+    total = None
+    if with_total:
+        total = total_bound(human, cmap, names, Q, X, weights, free, rows & ~unobserved)
+        total = np.minimum(total, cspan[None, :])
     return BoundReport(out, dc, capped, sens, counts, unobserved, total)

@@ -132,8 +132,6 @@ def fill_gaps(
         raise ConfigError(f"fill method: expected none, rigid, spline or both, got {method!r}")
     if not max_gap_s >= 0:
         raise ConfigError(f"max_gap_s: expected >= 0, got {max_gap_s}")
-    from scipy.interpolate import CubicSpline
-
     report = CleaningReport()
     report.gaps_found, report.never_visible = find_gaps(traj)
     pos = traj.positions.copy()
@@ -155,6 +153,8 @@ def fill_gaps(
         if method in ("spline", "both"):
             good = np.isfinite(pos[:, m, 0])
             if good.sum() >= 4:
+                from scipy.interpolate import CubicSpline
+
                 cs = CubicSpline(traj.time[good], pos[good, m])
                 pos[gap.start : gap.stop, m] = cs(traj.time[gap.start : gap.stop])
                 report.filled_spline.append(gap)

@@ -42,7 +42,11 @@ DEFAULT_MASS_KG = 75.0
 
 @dataclass(frozen=True)
 class ReconstructionOptions:
-    """How to reconstruct (defaults are what ``mocapkit markers reconstruct`` uses)."""
+    """How to reconstruct (defaults are what ``mocapkit markers reconstruct`` uses).
+
+    ``total_bound``: also compute the joint-error bound that holds
+    (:mod:`mocapkit.markers.bound_fit`, a least-squares fit per frame); eq. 15's bound and
+    the conditioning are always computed."""
 
     method: Method = "osc"
     mode: Mode = "offline"
@@ -54,6 +58,7 @@ class ReconstructionOptions:
     lowpass_hz: float | None = None
     start_s: float | None = None
     end_s: float | None = None
+    total_bound: bool = False
     osc: OSCParams = field(default_factory=OSCParams)
     ik: IKParams = field(default_factory=IKParams)
 
@@ -357,6 +362,7 @@ def reconstruct(
     result = ReconstructionResult.build(
         trial.time, human, names, tracked, X, Q, dq, elapsed, options.method, options.mode,
         [list(level) for level in levels], tasks, warn, weights,
+        with_total=options.total_bound,
     )  # fmt: skip
     if unregistered & set(tracked):
         warn.add(

@@ -86,10 +86,13 @@ class ReconstructionResult:
         locked: Mapping[str, Any],
         warnings: list[str],
         weights: FloatArray | None = None,
+        with_total: bool = True,
     ) -> ReconstructionResult:
         """Errors, named coordinates (NaN where undetermined) and the bound's report;
-        ``weights`` (M,) of ``names`` (default 1) weigh the conditioning's fit."""
-        P = np.array([MarkerKinematics(human, names).positions(q) for q in Q]).reshape(X.shape)
+        ``weights`` (M,) of ``names`` (default 1) weigh the conditioning's fit;
+        ``with_total``: also the bound that holds (``bound.total``)."""
+        kin = MarkerKinematics(human, names)
+        P = np.array([kin.positions(q) for q in Q]).reshape(X.shape)
         errors = np.linalg.norm(P - X, axis=2)
         cmap = coordinate_map(human)
         coords, gimbal = coordinates_and_gimbal(human, Q, cmap)
@@ -99,7 +102,7 @@ class ReconstructionResult:
         in_fit = np.array([n in set(tracked) for n in names])
         report = bound_report(
             human, cmap, names, Q, X, np.where(in_fit, w, 0.0), dq, root, dofs,
-            held=list(locked), columns=det,
+            held=list(locked), columns=det, with_total=with_total,
         )  # fmt: skip
         structural = det
         det = det & ~report.unobserved
@@ -178,9 +181,10 @@ class ReconstructionResult:
         return hi, lo
 
     def metrics(self, markers: Sequence[str] | None = None) -> dict[str, Any]:
-        """The figures of ``markers reconstruct --json``: means and maxima over the frames
-        where they exist (frames without a visible marker or a determined DOF are left out;
-        None if there is none at all)."""
+        """The figures of ``markers reconstruct --json`` (which adds the whole command's
+        ``fps`` and ``seconds``): means and maxima over the frames where they exist (frames
+        without a visible marker or a determined DOF are left out; None if there is none at
+        all). ``solve_fps``: frames per second of the reconstruction loop alone."""
         rms = self.frame_rms(markers)
         e = self._errors_of(markers)
         seen = np.isfinite(rms)
@@ -190,15 +194,22 @@ class ReconstructionResult:
         def rounded(x: float | None, digits: int) -> float | None:
             return None if x is None else round(float(x), digits)
 
-        return {
+        out: dict[str, Any] = {
             "frames": self.n_frames,
-            "fps": round(float(self.fps), 1),
+            "solve_fps": round(float(self.fps), 1),
             "marker_rms_mm": rounded(rms[seen].mean() * 1000 if seen.any() else None, 2),
             "marker_max_mm": rounded(e[np.isfinite(e)].max() * 1000 if seen.any() else None, 2),
             "joint_error_bound_deg_max": rounded(
                 np.degrees(bound[has].max()) if has.any() else None, 3
             ),
         }
+        if self.bound is not None and self.bound.total is not None:
+            tot = self.bound.total[:, self.angular]
+            fin = np.isfinite(tot)
+            out["joint_error_total_bound_deg_max"] = rounded(
+                np.degrees(tot[fin].max()) if fin.any() else None, 3
+            )
+        return out
 
     def column(self, name: str) -> FloatArray:
         return self.coordinates[:, self.coordinate_names.index(name)]
