@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from mocapkit.markers.prioritized import prioritized_torque
+from mocapkit.markers.prioritized import prioritized_torque, prioritized_torque_single
 from mocapkit.markers.rigid_fast import (
     dynamics_terms,
     forward_kinematics,
@@ -342,30 +342,42 @@ def osc_frame(
             q, v, lock_dof, lock_value, lower, upper, determined, push
         )
         n_lock = lock_rows.shape[0]
-        n_rows = n_lock + n_marker_rows
-        Jall = np.zeros((n_rows, nv))
-        acc = np.zeros(n_rows)
-        bias = np.zeros(n_rows)
-        dx = np.zeros(n_rows)
-        ptr = np.zeros(n_levels + 2, dtype=np.int64)
-        for c in range(n_lock):
-            iq = lock_rows[c]
-            Jall[c, iq - 1] = 1.0
-            acc[c] = kpl * (lock_target[c] - q[iq]) - kdl * v[iq - 1]
-        Jall[n_lock:] = Jm
-        acc[n_lock:] = accm
-        bias[n_lock:] = biasm
-        dx[n_lock:] = dxm
-        ptr[1] = n_lock
-        for lv in range(n_levels):
-            ptr[lv + 2] = n_lock + mptr[lv + 1]
         a_post = -kdp * v
         for iq in range(7, q.shape[0]):
             a_post[iq - 1] += kpp * (q_posture[iq] - q[iq])
-        # the bound (eq. 15) of the last step's marker errors; lock rows have no error
-        _Gamma, qdd, dq = prioritized_torque(
-            Amat, LA, h, Jall, acc, bias, ptr, a_post, dx, j == n_sub - 1, gains[6], True
-        )
+        lock_acc = np.empty(n_lock)
+        for c in range(n_lock):
+            iq = lock_rows[c]
+            lock_acc[c] = kpl * (lock_target[c] - q[iq]) - kdl * v[iq - 1]
+        if n_levels == 1 and n_marker_rows > 0:
+            # the default (one marker level): the same numbers by the cheaper route
+            _Gamma, qdd, dq_step = prioritized_torque_single(
+                Amat, LA, h, lock_rows - 1, lock_acc, Jm, accm, biasm, a_post, dxm,
+                j == n_sub - 1, gains[6],
+            )  # fmt: skip
+            if j == n_sub - 1:
+                dq = dq_step
+        else:
+            n_rows = n_lock + n_marker_rows
+            Jall = np.zeros((n_rows, nv))
+            acc = np.zeros(n_rows)
+            bias = np.zeros(n_rows)
+            dx = np.zeros(n_rows)
+            ptr = np.zeros(n_levels + 2, dtype=np.int64)
+            for c in range(n_lock):
+                Jall[c, lock_rows[c] - 1] = 1.0
+                acc[c] = lock_acc[c]
+            Jall[n_lock:] = Jm
+            acc[n_lock:] = accm
+            bias[n_lock:] = biasm
+            dx[n_lock:] = dxm
+            ptr[1] = n_lock
+            for lv in range(n_levels):
+                ptr[lv + 2] = n_lock + mptr[lv + 1]
+            # the bound (eq. 15) of the last step's marker errors; lock rows have no error
+            _Gamma, qdd, dq = prioritized_torque(
+                Amat, LA, h, Jall, acc, bias, ptr, a_post, dx, j == n_sub - 1, gains[6], True
+            )
         v = v + qdd * dt
         _cap_speed(v, gains[7])
         q = integrate(q, v * dt)

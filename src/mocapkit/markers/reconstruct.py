@@ -332,6 +332,7 @@ def reconstruct(
     rate = trial.rate_hz
     _warm_up(subject, names, X, weights, levels, q_init, rate, options)
     t0 = time.perf_counter()
+    P = None
     if options.method == "ik":
         sol = solve_ik(
             human, names, X, weights, q_init, tasks, q_posture=human.neutral(),
@@ -354,7 +355,7 @@ def reconstruct(
             Q = np.array([f.q for f in frames])
             dq = np.array([f.dq for f in frames])
         else:
-            Q, _, dq, _ = reconstruct_offline(
+            Q, P, dq, _ = reconstruct_offline(
                 human, names, X, rate, levels, tasks, q_init, human.neutral(),
                 options.osc, wmap,
             )  # fmt: skip
@@ -362,7 +363,7 @@ def reconstruct(
     result = ReconstructionResult.build(
         trial.time, human, names, tracked, X, Q, dq, elapsed, options.method, options.mode,
         [list(level) for level in levels], tasks, warn, weights,
-        with_total=options.total_bound,
+        with_total=options.total_bound, P=P,
     )  # fmt: skip
     if unregistered & set(tracked):
         warn.add(

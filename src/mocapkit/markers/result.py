@@ -87,12 +87,15 @@ class ReconstructionResult:
         warnings: list[str],
         weights: FloatArray | None = None,
         with_total: bool = True,
+        P: FloatArray | None = None,
     ) -> ReconstructionResult:
         """Errors, named coordinates (NaN where undetermined) and the bound's report;
         ``weights`` (M,) of ``names`` (default 1) weigh the conditioning's fit;
-        ``with_total``: also the bound that holds (``bound.total``)."""
-        kin = MarkerKinematics(human, names)
-        P = np.array([kin.positions(q) for q in Q]).reshape(X.shape)
+        ``with_total``: also the bound that holds (``bound.total``); ``P`` (N, M, 3): the
+        model's markers at Q when the method already has them."""
+        if P is None:
+            P = marker_positions(human, names, Q)
+        P = np.asarray(P, dtype=float).reshape(X.shape)
         errors = np.linalg.norm(P - X, axis=2)
         cmap = coordinate_map(human)
         coords, gimbal = coordinates_and_gimbal(human, Q, cmap)
@@ -102,7 +105,7 @@ class ReconstructionResult:
         in_fit = np.array([n in set(tracked) for n in names])
         report = bound_report(
             human, cmap, names, Q, X, np.where(in_fit, w, 0.0), dq, root, dofs,
-            held=list(locked), columns=det, with_total=with_total,
+            held=list(locked), columns=det, with_total=with_total, coords=coords,
         )  # fmt: skip
         structural = det
         det = det & ~report.unobserved
@@ -253,6 +256,18 @@ class ReconstructionResult:
             self.time, self.tracked_positions, self.marker_names, meta={"rate_hz": rate}
         )
         return write_trc(path, traj)
+
+
+def marker_positions(human: HumanModel, names: Sequence[str], Q: FloatArray) -> FloatArray:
+    """(N, M, 3) the model's markers ``names`` at each configuration of Q (N, nq) [m]."""
+    from mocapkit.markers import rigid_fast
+
+    fm = rigid_fast.flatten(human.model, MarkerKinematics(human, names).frame_ids)
+    Qc = np.ascontiguousarray(np.atleast_2d(Q), dtype=float)
+    P = rigid_fast.marker_positions_trial(
+        fm.parent, fm.R0, fm.p0, fm.axis, fm.marker_joint, fm.marker_offset, Qc
+    )
+    return np.asarray(P)
 
 
 def _no_visible_frames(X: FloatArray, names: Sequence[str], tracked: Sequence[str]) -> np.ndarray:
