@@ -346,7 +346,7 @@ def bound_report(
     span = np.concatenate([np.full(6, np.inf), hi - lo])
     with np.errstate(invalid="ignore"):
         capped_q = np.abs(out) > span
-    out = np.where(capped_q, np.sign(out) * span, out)
+    out = np.where(capped_q, np.copysign(span, out), out)
     cols = np.ones((len(Q), len(cmap.names)), dtype=bool) if columns is None else columns
     dc = np.empty((len(Q), len(cmap.names)))
     dep = np.empty((len(Q), len(cmap.names)), dtype=bool)
@@ -365,7 +365,7 @@ def bound_report(
             cspan[k] = np.pi
     with np.errstate(invalid="ignore"):
         over = np.abs(dc) > cspan
-    dc = np.where(over, np.sign(dc) * cspan, dc)
+    dc = np.where(over, np.copysign(cspan, dc), dc)
     capped = (over | dep) & cols
     held_idx = [6 + human.dof_names.index(d) for d in held if d in human.dof_names]
     free = np.concatenate([np.repeat(root[:, None], 6, axis=1), dofs], axis=1)

@@ -38,6 +38,7 @@ from mocapkit.markers.rigid_fast import (
     integrate,
     marker_bias,
     marker_kinematics,
+    marker_positions,
 )
 
 FloatArray = np.ndarray  # numba kernels: mypy does not track their dtypes
@@ -220,6 +221,91 @@ def reacquire(
     return n - 6
 
 
+LIMIT_ROUNDS = 4  # solves per step at most: the first, then one per batch of DOFs held
+
+
+@njit(cache=True)
+def _solve_levels(
+    Amat: FloatArray,
+    LA: FloatArray,
+    h: FloatArray,
+    lock_cols: np.ndarray,
+    lock_acc: FloatArray,
+    Jm: FloatArray,
+    accm: FloatArray,
+    biasm: FloatArray,
+    dxm: FloatArray,
+    mptr: np.ndarray,
+    n_levels: int,
+    n_marker_rows: int,
+    a_post: FloatArray,
+    want_bound: bool,
+    damping: float,
+) -> tuple[FloatArray, FloatArray]:
+    """q̈ and the bound Δq of one control step: held DOFs (rows of the identity, exact) >
+    the marker levels > posture (eq. 6-13); the default single marker level by the
+    cheaper joint-space route (the same numbers)."""
+    nv = Amat.shape[0]
+    n_lock = lock_cols.shape[0]
+    if n_levels == 1 and n_marker_rows > 0:
+        _G, qdd, dq = prioritized_torque_single(
+            Amat, LA, h, lock_cols, lock_acc, Jm, accm, biasm, a_post, dxm, want_bound, damping
+        )
+        return qdd, dq
+    n_rows = n_lock + n_marker_rows
+    Jall = np.zeros((n_rows, nv))
+    acc = np.zeros(n_rows)
+    bias = np.zeros(n_rows)
+    dx = np.zeros(n_rows)
+    ptr = np.zeros(n_levels + 2, dtype=np.int64)
+    for c in range(n_lock):
+        Jall[c, lock_cols[c]] = 1.0
+        acc[c] = lock_acc[c]
+    Jall[n_lock:] = Jm
+    acc[n_lock:] = accm
+    bias[n_lock:] = biasm
+    dx[n_lock:] = dxm
+    ptr[1] = n_lock
+    for lv in range(n_levels):
+        ptr[lv + 2] = n_lock + mptr[lv + 1]
+    # the bound (eq. 15) of the last step's marker errors; lock rows have no error
+    _G, qdd, dq = prioritized_torque(
+        Amat, LA, h, Jall, acc, bias, ptr, a_post, dx, want_bound, damping, True
+    )
+    return qdd, dq
+
+
+STEP_GROWTH = 1.5  # a step may raise the weighted marker error by this factor (+ slack)
+STEP_HALVINGS = 6  # then its velocity is halved, this many times at most
+
+
+@njit(cache=True)
+def _target_error(
+    P: FloatArray,
+    x0: FloatArray,
+    x1: FloatArray,
+    xd0: FloatArray,
+    xdd0: FloatArray,
+    tracked: np.ndarray,
+    row_weight: FloatArray,
+    s: float,
+) -> float:
+    """Σ w_m ‖x_m(s) − P_m‖² over the tracked markers, x_m(s) the frame's target at time s
+    after t_{f-1} (as the control law's; a marker not visible at t_{f-1}: x1)."""
+    total = 0.0
+    for m in range(P.shape[0]):
+        if not tracked[m]:
+            continue
+        for c in range(3):
+            if np.isfinite(x0[m, 0]):
+                xt = x0[m, c] + xd0[m, c] * s + 0.5 * xdd0[m, c] * s * s
+            else:
+                xt = x1[m, c]
+            d = xt - P[m, c]
+            total += row_weight[m] * d * d
+    return total
+
+
 @njit(cache=True)
 def osc_frame(
     parent: np.ndarray,
@@ -341,53 +427,76 @@ def osc_frame(
         lock_rows, lock_target, _kind = _lock_rows(
             q, v, lock_dof, lock_value, lower, upper, determined, push
         )
-        n_lock = lock_rows.shape[0]
         a_post = -kdp * v
         for iq in range(7, q.shape[0]):
             a_post[iq - 1] += kpp * (q_posture[iq] - q[iq])
-        lock_acc = np.empty(n_lock)
+        n_lock = lock_rows.shape[0]
+        lock_cols = np.empty(nv, dtype=np.int64)
+        lock_acc = np.empty(nv)
         for c in range(n_lock):
             iq = lock_rows[c]
+            lock_cols[c] = iq - 1
             lock_acc[c] = kpl * (lock_target[c] - q[iq]) - kdl * v[iq - 1]
-        if n_levels == 1 and n_marker_rows > 0:
-            # the default (one marker level): the same numbers by the cheaper route
-            _Gamma, qdd, dq_step = prioritized_torque_single(
-                Amat, LA, h, lock_rows - 1, lock_acc, Jm, accm, biasm, a_post, dxm,
-                j == n_sub - 1, gains[6],
+        want = j == n_sub - 1
+        qdd = np.zeros(nv)
+        dq_step = np.zeros(nv)
+        # Active set of the joint limits: a free DOF that this step's solution would carry
+        # through its limit is held landing exactly on it, and the step is solved again,
+        # so the other DOFs get accelerations that do not count on it (clamping it after
+        # the solve left them to overshoot, and the arm chattered between limits).
+        for _round in range(LIMIT_ROUNDS):
+            qdd, dq_step = _solve_levels(
+                Amat, LA, h, lock_cols[:n_lock], lock_acc[:n_lock], Jm, accm, biasm, dxm,
+                mptr, n_levels, n_marker_rows, a_post, want, gains[6],
             )  # fmt: skip
-            if j == n_sub - 1:
-                dq = dq_step
-        else:
-            n_rows = n_lock + n_marker_rows
-            Jall = np.zeros((n_rows, nv))
-            acc = np.zeros(n_rows)
-            bias = np.zeros(n_rows)
-            dx = np.zeros(n_rows)
-            ptr = np.zeros(n_levels + 2, dtype=np.int64)
-            for c in range(n_lock):
-                Jall[c, lock_rows[c] - 1] = 1.0
-                acc[c] = lock_acc[c]
-            Jall[n_lock:] = Jm
-            acc[n_lock:] = accm
-            bias[n_lock:] = biasm
-            dx[n_lock:] = dxm
-            ptr[1] = n_lock
-            for lv in range(n_levels):
-                ptr[lv + 2] = n_lock + mptr[lv + 1]
-            # the bound (eq. 15) of the last step's marker errors; lock rows have no error
-            _Gamma, qdd, dq = prioritized_torque(
-                Amat, LA, h, Jall, acc, bias, ptr, a_post, dx, j == n_sub - 1, gains[6], True
-            )
-        v = v + qdd * dt
-        _cap_speed(v, gains[7])
-        q = integrate(q, v * dt)
+            added = 0
+            for iq in range(7, q.shape[0]):
+                iv = iq - 1
+                held = False
+                for c in range(n_lock):
+                    if lock_cols[c] == iv:
+                        held = True
+                        break
+                if held:
+                    continue
+                q_next = q[iq] + (v[iv] + qdd[iv] * dt) * dt
+                if q_next < lower[iq] - 1e-12 or q_next > upper[iq] + 1e-12:
+                    limit = lower[iq] if q_next < lower[iq] else upper[iq]
+                    lock_cols[n_lock] = iv
+                    lock_acc[n_lock] = (limit - q[iq] - v[iv] * dt) / (dt * dt)
+                    n_lock += 1
+                    added += 1
+            if added == 0:
+                break
+        if want:
+            dq = dq_step
+        v_new = v + qdd * dt
+        _cap_speed(v_new, gains[7])
+        # A step that carries the model away from its targets is shortened (its velocity
+        # halved, up to STEP_HALVINGS times): near a singular pose (a shoulder's two axes
+        # aligned) the damped inverse can turn the task accelerations into joint speeds
+        # at the cap, which threw CMU 85_12's arm onto a far branch of its angles.
+        s_next = s_now + dt
+        err_hold = _target_error(P, x0, x1, xd0, xdd0, tracked, row_weight, s_next)
+        slack = 1e-6 * n_marker_rows  # 1 mm per tracked marker
+        for _half in range(STEP_HALVINGS + 1):
+            q_try = integrate(q, v_new * dt)
+            for iq in range(7, q.shape[0]):
+                q_try[iq] = min(max(q_try[iq], lower[iq]), upper[iq])
+            if _half == STEP_HALVINGS:
+                break
+            Rt, tt, _St = forward_kinematics(parent, R0, p0, axis, q_try)
+            P_try = marker_positions(Rt, tt, marker_joint, marker_offset)
+            err_try = _target_error(P_try, x0, x1, xd0, xdd0, tracked, row_weight, s_next)
+            if err_try <= STEP_GROWTH * err_hold + slack:
+                break
+            v_new = 0.5 * v_new
         for iq in range(7, q.shape[0]):
-            if q[iq] < lower[iq]:
-                q[iq] = lower[iq]
-                v[iq - 1] = max(v[iq - 1], 0.0)
-            elif q[iq] > upper[iq]:
-                q[iq] = upper[iq]
-                v[iq - 1] = min(v[iq - 1], 0.0)
+            if q_try[iq] <= lower[iq]:
+                v_new[iq - 1] = max(v_new[iq - 1], 0.0)
+            elif q_try[iq] >= upper[iq]:
+                v_new[iq - 1] = min(v_new[iq - 1], 0.0)
+        q, v = q_try, v_new
         if not (np.isfinite(q).all() and np.isfinite(v).all() and np.abs(v).max() < 1e4):
             nan = np.full(M, np.nan)
             return q * np.nan, v * np.nan, np.full((M, 3), np.nan), np.full(nv, np.nan), nan

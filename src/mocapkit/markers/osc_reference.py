@@ -16,6 +16,7 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.body.human_model import HumanModel
 from mocapkit.markers.kinematics import MarkerKinematics
+from mocapkit.markers.osc_kernels import LIMIT_ROUNDS, STEP_GROWTH, STEP_HALVINGS
 from mocapkit.markers.prioritized import RANK_TOLERANCE
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -216,33 +217,67 @@ class ReferenceStepper:
             rows, target = self._lock_rows(
                 q, v, lock_dof, lock_value, lower, upper, determined, push
             )
-            lock_J = np.zeros((len(rows), nv))
-            lock_acc = []
-            for c, (iq, tgt) in enumerate(zip(rows, target, strict=True)):
-                lock_J[c, iq - 1] = 1.0
-                lock_acc.append(kpl * (tgt - q[iq]) - kdl * v[iq - 1])
-            ptr = [0, len(rows), *(len(rows) + p for p in mptr)]
+            cols = [int(iq) - 1 for iq in rows]
+            lock_acc = [
+                kpl * (tgt - q[iq]) - kdl * v[iq - 1] for iq, tgt in zip(rows, target, strict=True)
+            ]
             a_post = -kdp * v
             a_post[6:] += kpp * (q_posture[7:] - q[7:])
-            Gamma, Jbar = prioritized_torque_reference(
-                Amat, h, np.vstack([lock_J, Jmat]), np.array(lock_acc + accm),
-                np.array([0.0] * len(rows) + biasm), ptr, a_post, damping, True,
-            )  # fmt: skip
+            for _round in range(LIMIT_ROUNDS):  # the kernel's active set of the limits
+                lock_J = np.zeros((len(cols), nv))
+                for c, iv in enumerate(cols):
+                    lock_J[c, iv] = 1.0
+                ptr = [0, len(cols), *(len(cols) + p for p in mptr)]
+                Gamma, Jbar = prioritized_torque_reference(
+                    Amat, h, np.vstack([lock_J, Jmat]), np.array(lock_acc + accm),
+                    np.array([0.0] * len(cols) + biasm), ptr, a_post, damping, True,
+                )  # fmt: skip
+                qdd = np.linalg.solve(Amat, Gamma - h)
+                q_next = q[7:] + (v[6:] + qdd[6:] * dt) * dt
+                cross = [
+                    k for k in range(nv - 6)
+                    if 6 + k not in cols
+                    and (q_next[k] < lower[7 + k] - 1e-12 or q_next[k] > upper[7 + k] + 1e-12)
+                ]  # fmt: skip
+                if not cross:
+                    break
+                for k in cross:
+                    limit = lower[7 + k] if q_next[k] < lower[7 + k] else upper[7 + k]
+                    cols.append(6 + k)
+                    lock_acc.append((limit - q[7 + k] - v[6 + k] * dt) / (dt * dt))
             if dx:
-                dq = Jbar[:, len(rows) :] @ np.array(dx)  # eq. 15, the last step's errors
-            qdd = np.linalg.solve(Amat, Gamma - h)
-            v = v + qdd * dt
-            lin, ang = np.linalg.norm(v[:3]), np.linalg.norm(v[3:6])
+                dq = Jbar[:, len(cols) :] @ np.array(dx)  # eq. 15, the last step's errors
+            v_new = v + qdd * dt
+            lin, ang = np.linalg.norm(v_new[:3]), np.linalg.norm(v_new[3:6])
             if lin > 0.25 * max_speed:
-                v[:3] *= 0.25 * max_speed / lin
+                v_new[:3] *= 0.25 * max_speed / lin
             if ang > max_speed:
-                v[3:6] *= max_speed / ang
-            v[6:] = np.clip(v[6:], -max_speed, max_speed)
-            q = np.asarray(pin.integrate(model, q, v * dt))
-            low, high = q[7:] < lower[7:], q[7:] > upper[7:]
-            q[7:] = np.clip(q[7:], lower[7:], upper[7:])
-            v[6:][low] = np.maximum(v[6:][low], 0.0)
-            v[6:][high] = np.minimum(v[6:][high], 0.0)
+                v_new[3:6] *= max_speed / ang
+            v_new[6:] = np.clip(v_new[6:], -max_speed, max_speed)
+            # the kernel's step safeguard: a step away from the targets is shortened
+            s_next = s + dt
+            x_next = np.where(
+                np.isfinite(x0[:, :1]), x0 + xd0 * s_next + 0.5 * xdd0 * s_next**2, x1
+            )
+
+            def error(P_: FloatArray, x_next: FloatArray = x_next) -> float:
+                d = (x_next - P_)[tracked]
+                return float(np.sum(row_weight[tracked][:, None] * d * d))
+
+            err_hold = error(P)
+            slack = 1e-6 * len(accm)
+            for half in range(STEP_HALVINGS + 1):
+                q_try = np.asarray(pin.integrate(model, q, v_new * dt))
+                q_try[7:] = np.clip(q_try[7:], lower[7:], upper[7:])
+                if half == STEP_HALVINGS:
+                    break
+                if error(self.kin.positions(q_try)) <= STEP_GROWTH * err_hold + slack:
+                    break
+                v_new = 0.5 * v_new
+            low, high = q_try[7:] <= lower[7:], q_try[7:] >= upper[7:]
+            v_new[6:][low] = np.maximum(v_new[6:][low], 0.0)
+            v_new[6:][high] = np.minimum(v_new[6:][high], 0.0)
+            q, v = q_try, v_new
         P = self.kin.positions(q)
         err = np.full(M, np.nan)
         vis = np.isfinite(x1[:, 0])

@@ -365,6 +365,7 @@ def reconstruct(
         [list(level) for level in levels], tasks, warn, weights,
         with_total=options.total_bound, P=P,
     )  # fmt: skip
+    result.rate_hz = rate
     if unregistered & set(tracked):
         warn.add(
             f"markers {', '.join(sorted(unregistered & set(tracked)))} were not in the static "

@@ -12,7 +12,7 @@ of the figures' means and maxima, and counted in a warning.
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -47,6 +47,7 @@ class ReconstructionResult:
             for the reported coordinates, which the figures use.
         levels: the marker subsets in priority order.
         elapsed_s: wall time of the reconstruction loop.
+        rate_hz: the trial's declared frame rate (the time column may be rounded).
         bound: the bound's report (capped entries, conditioning per frame and DOF).
     """
 
@@ -68,6 +69,7 @@ class ReconstructionResult:
     bound: BoundReport | None = None
     warnings: list[str] = field(default_factory=list)
     meta: dict[str, Any] = field(default_factory=dict)
+    rate_hz: float | None = None
 
     @classmethod
     def build(
@@ -99,6 +101,7 @@ class ReconstructionResult:
         errors = np.linalg.norm(P - X, axis=2)
         cmap = coordinate_map(human)
         coords, gimbal = coordinates_and_gimbal(human, Q, cmap)
+        coords = unwrap_in_time(coords, range(3, 6))  # a subject who turns: no +-180 jumps
         root, dofs = dof_determined(human, names, tracked, X, held=locked)
         det = column_determined(cmap, root, dofs)
         w = np.ones(len(names)) if weights is None else np.asarray(weights, dtype=float)
@@ -247,15 +250,34 @@ class ReconstructionResult:
         return p
 
     def write_tracked_trc(self, path: str | Path) -> Path:
-        """The model's markers over time as a TRC file (z-up world, mm)."""
+        """The model's markers over time as a TRC file (mm) in OpenSim's y-up ground, the
+        frame of the .mot's pelvis columns (``v_os = (x, z, -y)`` of our z-up world), at
+        the trial's exact frame rate."""
         from mocapkit.io.trc import write_trc
+        from mocapkit.markers.coordinates import Z_UP_TO_OPENSIM
         from mocapkit.markers.trajectories import MarkerTrajectories
 
-        rate = 1.0 / float(np.median(np.diff(self.time))) if self.n_frames > 1 else 0.0
+        rate = self.rate_hz
+        if rate is None:
+            rate = 1.0 / float(np.median(np.diff(self.time))) if self.n_frames > 1 else 0.0
         traj = MarkerTrajectories(
-            self.time, self.tracked_positions, self.marker_names, meta={"rate_hz": rate}
+            self.time,
+            self.tracked_positions @ Z_UP_TO_OPENSIM.T,
+            self.marker_names,
+            meta={"rate_hz": rate, "up_axis": "y"},
         )
-        return write_trc(path, traj)
+        return write_trc(path, traj, rate_hz=rate)
+
+
+def unwrap_in_time(values: FloatArray, columns: Iterable[int]) -> FloatArray:
+    """A copy of ``values`` (N, K) [rad] whose ``columns`` are continuous in time: each
+    step takes the 2 pi branch nearest the previous finite value (NaN gaps skipped)."""
+    out = np.array(values, dtype=float, copy=True)
+    for k in columns:
+        fin = np.flatnonzero(np.isfinite(out[:, k]))
+        if fin.size > 1:
+            out[fin, k] = np.unwrap(out[fin, k])
+    return out
 
 
 def marker_positions(human: HumanModel, names: Sequence[str], Q: FloatArray) -> FloatArray:

@@ -281,6 +281,19 @@ def marker_kinematics(
 
 
 @njit(cache=True)
+def marker_positions(
+    R: FloatArray, t: FloatArray, marker_joint: IntArray, marker_offset: FloatArray
+) -> FloatArray:
+    """Marker positions (M, 3) for joint poses R (nj, 3, 3), t (nj, 3)."""
+    M = marker_joint.shape[0]
+    out = np.empty((M, 3))
+    for m in range(M):
+        x0, x1, x2 = _point(R, t, marker_joint[m], marker_offset[m])
+        out[m, 0], out[m, 1], out[m, 2] = x0, x1, x2
+    return out
+
+
+@njit(cache=True)
 def marker_positions_trial(
     parent: IntArray,
     R0: FloatArray,
