@@ -48,8 +48,18 @@ def test_report_and_inspect(gait: Path, tmp_path: Path, capsys: pytest.CaptureFi
     ])  # fmt: skip
     assert code == 0
     summary = json.loads(capsys.readouterr().out)
-    assert summary["levels"] == [["R.Acromium", "L.Wrist.Lat"], ["L.Elbow", "R.Wrist.Lat"]]
+    assert summary["levels"][:2] == [["R.Acromium", "L.Wrist.Lat"], ["L.Elbow", "R.Wrist.Lat"]]
+    assert len(summary["levels"]) == 3  # the paper's two subsets, then every other marker
+    # issue 12: the paper's grouping gave all-NaN angles and a bound of 0.0; the held
+    # subtalar/mtp (bound 0 by construction) no longer count
+    assert summary["metrics"]["joint_error_bound_deg_max"] > 0.0
     assert (tmp_path / "rep" / "fig3_markers.png").is_file()
+    assert main([
+        "markers", "report", str(gait / "subject01_walk1.trc"), "--static",
+        str(gait / "subject01_static.trc"), "--grouping", "paper-only", "--end-s", "0.5",
+        "-o", str(tmp_path / "rep2"),
+    ]) == 1  # fmt: skip
+    assert "determine no joint angle of the model" in capsys.readouterr().err
     assert main(["markers", "inspect", str(gait / "subject01_walk1.trc"), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["frames"] == 151

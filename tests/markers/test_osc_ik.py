@@ -107,7 +107,7 @@ def test_osc_online_equals_offline_and_reference(case: dict) -> None:
 
 def test_paper_grouping_tracks_its_four_markers(case: dict) -> None:
     human, names, X, Q = case["human"], case["names"], case["X"], case["Q"]
-    levels = _levels(case, "paper")
+    levels = _levels(case, "paper-only")
     assert levels == (("R.Acromium", "L.Wrist.Lat"), ("L.Elbow", "R.Wrist.Lat"))
     _, _, _, E = reconstruct_offline(
         human,

@@ -45,7 +45,8 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         "--grouping",
         default="single",
         help="marker priority levels for osc: single, independent, tree, weights, "
-        "paper, or a YAML file (default: single)",
+        "paper (the paper's two subsets above all other markers), paper-only (the paper's "
+        "four markers alone), or a YAML file (default: single)",
     )
     p.add_argument(
         "--height-m",

@@ -280,7 +280,7 @@ STEP_HALVINGS = 6  # then its velocity is halved, this many times at most
 
 
 @njit(cache=True)
-def _target_error(
+def _target_errors(
     P: FloatArray,
     x0: FloatArray,
     x1: FloatArray,
@@ -288,22 +288,41 @@ def _target_error(
     xdd0: FloatArray,
     tracked: np.ndarray,
     row_weight: FloatArray,
+    level_ptr: np.ndarray,
+    level_markers: np.ndarray,
     s: float,
-) -> float:
-    """Σ w_m ‖x_m(s) − P_m‖² over the tracked markers, x_m(s) the frame's target at time s
-    after t_{f-1} (as the control law's; a marker not visible at t_{f-1}: x1)."""
-    total = 0.0
-    for m in range(P.shape[0]):
-        if not tracked[m]:
-            continue
-        for c in range(3):
-            if np.isfinite(x0[m, 0]):
-                xt = x0[m, c] + xd0[m, c] * s + 0.5 * xdd0[m, c] * s * s
-            else:
-                xt = x1[m, c]
-            d = xt - P[m, c]
-            total += row_weight[m] * d * d
-    return total
+) -> FloatArray:
+    """Per priority level, Σ w_m ‖x_m(s) − P_m‖² over its tracked markers, x_m(s) the
+    frame's target at time s after t_{f-1} (as the control law's; a marker not visible at
+    t_{f-1}: x1)."""
+    n_levels = level_ptr.shape[0] - 1
+    out = np.zeros(n_levels)
+    for lv in range(n_levels):
+        for k in range(level_ptr[lv], level_ptr[lv + 1]):
+            m = level_markers[k]
+            if not tracked[m]:
+                continue
+            for c in range(3):
+                if np.isfinite(x0[m, 0]):
+                    xt = x0[m, c] + xd0[m, c] * s + 0.5 * xdd0[m, c] * s * s
+                else:
+                    xt = x1[m, c]
+                d = xt - P[m, c]
+                out[lv] += row_weight[m] * d * d
+    return out
+
+
+@njit(cache=True)
+def _step_worse(err_try: FloatArray, err_hold: FloatArray, slack: FloatArray) -> bool:
+    """Lexicographic over the priority levels: the first level whose error moves by more
+    than its slack decides (worse: grown by more than STEP_GROWTH); a lower level may
+    lose what a higher one gains."""
+    for lv in range(err_try.shape[0]):
+        if err_try[lv] > STEP_GROWTH * err_hold[lv] + slack[lv]:
+            return True
+        if err_try[lv] < err_hold[lv] - slack[lv]:
+            return False
+    return False
 
 
 @njit(cache=True)
@@ -473,12 +492,17 @@ def osc_frame(
         v_new = v + qdd * dt
         _cap_speed(v_new, gains[7])
         # A step that carries the model away from its targets is shortened (its velocity
-        # halved, up to STEP_HALVINGS times): near a singular pose (a shoulder's two axes
-        # aligned) the damped inverse can turn the task accelerations into joint speeds
-        # at the cap, which threw CMU 85_12's arm onto a far branch of its angles.
+        # halved, up to STEP_HALVINGS times; levels compared in priority order): near a
+        # singular pose (a shoulder's two axes aligned) the damped inverse can turn the
+        # task accelerations into joint speeds at the cap, which threw CMU 85_12's arm
+        # onto a far branch of its angles.
         s_next = s_now + dt
-        err_hold = _target_error(P, x0, x1, xd0, xdd0, tracked, row_weight, s_next)
-        slack = 1e-6 * n_marker_rows  # 1 mm per tracked marker
+        err_hold = _target_errors(
+            P, x0, x1, xd0, xdd0, tracked, row_weight, level_ptr, level_markers, s_next
+        )
+        slack = np.empty(n_levels)  # (1 mm)² per tracked marker of the level
+        for lv in range(n_levels):
+            slack[lv] = 1e-6 * (mptr[lv + 1] - mptr[lv]) / 3.0
         for _half in range(STEP_HALVINGS + 1):
             q_try = integrate(q, v_new * dt)
             for iq in range(7, q.shape[0]):
@@ -487,8 +511,10 @@ def osc_frame(
                 break
             Rt, tt, _St = forward_kinematics(parent, R0, p0, axis, q_try)
             P_try = marker_positions(Rt, tt, marker_joint, marker_offset)
-            err_try = _target_error(P_try, x0, x1, xd0, xdd0, tracked, row_weight, s_next)
-            if err_try <= STEP_GROWTH * err_hold + slack:
+            err_try = _target_errors(
+                P_try, x0, x1, xd0, xdd0, tracked, row_weight, level_ptr, level_markers, s_next
+            )
+            if not _step_worse(err_try, err_hold, slack):
                 break
             v_new = 0.5 * v_new
         for iq in range(7, q.shape[0]):

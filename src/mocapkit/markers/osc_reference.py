@@ -260,18 +260,31 @@ class ReferenceStepper:
                 np.isfinite(x0[:, :1]), x0 + xd0 * s_next + 0.5 * xdd0 * s_next**2, x1
             )
 
-            def error(P_: FloatArray, x_next: FloatArray = x_next) -> float:
-                d = (x_next - P_)[tracked]
-                return float(np.sum(row_weight[tracked][:, None] * d * d))
+            def errors(P_: FloatArray, x_next: FloatArray = x_next) -> FloatArray:
+                out = np.zeros(len(level_ptr) - 1)
+                for lv in range(len(level_ptr) - 1):
+                    ms = [int(m) for m in level_markers[level_ptr[lv] : level_ptr[lv + 1]]]
+                    ms = [m for m in ms if tracked[m]]
+                    d = x_next[ms] - P_[ms]
+                    out[lv] = float(np.sum(row_weight[ms][:, None] * d * d))
+                return out
 
-            err_hold = error(P)
-            slack = 1e-6 * len(accm)
+            def worse(e_try: FloatArray, e_hold: FloatArray, slack: FloatArray) -> bool:
+                for a, b, sl in zip(e_try, e_hold, slack, strict=True):
+                    if a > STEP_GROWTH * b + sl:
+                        return True
+                    if a < b - sl:
+                        return False
+                return False
+
+            err_hold = errors(P)
+            slack = 1e-6 * np.diff(np.array([0, *mptr], dtype=float)) / 3.0
             for half in range(STEP_HALVINGS + 1):
                 q_try = np.asarray(pin.integrate(model, q, v_new * dt))
                 q_try[7:] = np.clip(q_try[7:], lower[7:], upper[7:])
                 if half == STEP_HALVINGS:
                     break
-                if error(self.kin.positions(q_try)) <= STEP_GROWTH * err_hold + slack:
+                if not worse(errors(self.kin.positions(q_try)), err_hold, slack):
                     break
                 v_new = 0.5 * v_new
             low, high = q_try[7:] <= lower[7:], q_try[7:] >= upper[7:]

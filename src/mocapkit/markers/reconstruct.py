@@ -366,6 +366,13 @@ def reconstruct(
         with_total=options.total_bound, P=P,
     )  # fmt: skip
     result.rate_hz = rate
+    if not np.isfinite(result.coordinates[:, result.fitted_angles]).any():
+        raise DataError(
+            f"the {len(tracked)} tracked markers ({', '.join(tracked[:8])}"
+            f"{' ...' if len(tracked) > 8 else ''}) determine no joint angle of the model: "
+            "its pelvis and trunk stay free. Track more markers (--grouping paper puts the "
+            "paper's levels above all the others; the default is single)"
+        )
     if unregistered & set(tracked):
         warn.add(
             f"markers {', '.join(sorted(unregistered & set(tracked)))} were not in the static "

@@ -48,6 +48,7 @@ class ReconstructionResult:
         levels: the marker subsets in priority order.
         elapsed_s: wall time of the reconstruction loop.
         rate_hz: the trial's declared frame rate (the time column may be rounded).
+        held: (K,) coordinates held by a coordinate task (not fitted to markers).
         bound: the bound's report (capped entries, conditioning per frame and DOF).
     """
 
@@ -70,6 +71,7 @@ class ReconstructionResult:
     warnings: list[str] = field(default_factory=list)
     meta: dict[str, Any] = field(default_factory=dict)
     rate_hz: float | None = None
+    held: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
     @classmethod
     def build(
@@ -138,6 +140,9 @@ class ReconstructionResult:
             angular=cmap.angular,
             bound=report,
             warnings=warnings,
+            held=np.array(
+                [kind == "dof" and human.dof_names[a] in locked for kind, a, _ in cmap.source]
+            ),
         )
 
     # -- figures ---------------------------------------------------------------------------
@@ -175,10 +180,17 @@ class ReconstructionResult:
             return np.full(self.coordinates.shape, np.nan)
         return self.bound.dc
 
+    @property
+    def fitted_angles(self) -> np.ndarray:
+        """(K,) bool: rotational coordinates a marker fit determines (not the translations,
+        not those a coordinate task holds, whose bound is 0 by construction)."""
+        held = self.held if self.held.shape == self.angular.shape else np.zeros_like(self.angular)
+        return self.angular & ~held
+
     def dq_extremes(self) -> tuple[FloatArray, FloatArray]:
-        """Per frame Δq_max and Δq_min over the determined rotational coordinates (eq. 17)
-        [rad]; NaN in frames where none is determined."""
-        rot = self.coordinate_bound[:, self.angular]
+        """Per frame Δq_max and Δq_min over the determined rotational coordinates that
+        markers fit (eq. 17) [rad]; NaN in frames where none is determined."""
+        rot = self.coordinate_bound[:, self.fitted_angles]
         has = np.isfinite(rot).any(axis=1)
         hi = np.full(rot.shape[0], np.nan)
         lo = np.full(rot.shape[0], np.nan)
@@ -194,7 +206,7 @@ class ReconstructionResult:
         rms = self.frame_rms(markers)
         e = self._errors_of(markers)
         seen = np.isfinite(rms)
-        bound = np.abs(self.coordinate_bound[:, self.angular])
+        bound = np.abs(self.coordinate_bound[:, self.fitted_angles])
         has = np.isfinite(bound)
 
         def rounded(x: float | None, digits: int) -> float | None:
@@ -210,7 +222,7 @@ class ReconstructionResult:
             ),
         }
         if self.bound is not None and self.bound.total is not None:
-            tot = self.bound.total[:, self.angular]
+            tot = self.bound.total[:, self.fitted_angles]
             fin = np.isfinite(tot)
             out["joint_error_total_bound_deg_max"] = rounded(
                 np.degrees(tot[fin].max()) if fin.any() else None, 3
