@@ -155,6 +155,13 @@ def register(subparsers: Any) -> None:
         help="output joint angles: .mot (OpenSim) or .csv",
     )
     rec.add_argument(
+        "--osim",
+        type=Path,
+        default=None,
+        help="also write the scaled model (bodies, joints, registered markers) as an "
+        "OpenSim .osim that the .mot poses",
+    )
+    rec.add_argument(
         "--tracked-trc",
         type=Path,
         default=None,
@@ -227,7 +234,11 @@ def _reconstruct(args: argparse.Namespace) -> int:
     suffix = args.output.suffix.lower()
     if suffix not in (".mot", ".csv"):
         raise ConfigError(f"-o {args.output}: expected a .mot or .csv file name")
-    result, _, _ = _run(args)
+    result, subject, _ = _run(args)
+    if args.osim is not None:
+        from mocapkit.io.osim_model import write_osim
+
+        write_osim(args.osim, subject.human)
     if suffix == ".mot":
         result.write_mot(args.output)
     else:

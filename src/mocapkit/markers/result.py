@@ -22,7 +22,11 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.body.human_model import HumanModel
 from mocapkit.markers.bounds import POORLY_DETERMINED_DEG_PER_MM, BoundReport, bound_report
-from mocapkit.markers.coordinates import coordinate_map, coordinates_and_gimbal
+from mocapkit.markers.coordinates import (
+    CoordinateMap,
+    coordinate_map,
+    coordinates_and_gimbal,
+)
 from mocapkit.markers.determined import column_determined, dof_determined
 from mocapkit.markers.kinematics import MarkerKinematics
 
@@ -49,6 +53,9 @@ class ReconstructionResult:
         elapsed_s: wall time of the reconstruction loop.
         rate_hz: the trial's declared frame rate (the time column may be rounded).
         held: (K,) coordinates held by a coordinate task (not fitted to markers).
+        model_dof_names, model_dof_values: the model's DOFs that OpenSim's coordinates are
+            computed from (the spine, neck and shoulders), (N, k) [rad]; NaN where the
+            coordinates computed from them are.
         bound: the bound's report (capped entries, conditioning per frame and DOF).
     """
 
@@ -72,6 +79,8 @@ class ReconstructionResult:
     meta: dict[str, Any] = field(default_factory=dict)
     rate_hz: float | None = None
     held: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    model_dof_names: tuple[str, ...] = ()
+    model_dof_values: FloatArray | None = None
 
     @classmethod
     def build(
@@ -122,6 +131,7 @@ class ReconstructionResult:
             warnings.append(msg)
             log.warning("%s", msg)
         cnames = cmap.names
+        behind, behind_values = _dofs_behind(human, cmap, Q, coords)
         return cls(
             time=t,
             q=Q,
@@ -143,6 +153,8 @@ class ReconstructionResult:
             held=np.array(
                 [kind == "dof" and human.dof_names[a] in locked for kind, a, _ in cmap.source]
             ),
+            model_dof_names=tuple(human.dof_names[i] for i in behind),
+            model_dof_values=behind_values,
         )
 
     # -- figures ---------------------------------------------------------------------------
@@ -233,7 +245,7 @@ class ReconstructionResult:
         return self.coordinates[:, self.coordinate_names.index(name)]
 
     # -- files -----------------------------------------------------------------------------
-    def _output_columns(self) -> tuple[list[str], FloatArray]:
+    def _output_columns(self, with_model_dofs: bool = False) -> tuple[list[str], FloatArray]:
         keep = [
             k
             for k in range(len(self.coordinate_names))
@@ -242,13 +254,25 @@ class ReconstructionResult:
         data = self.coordinates[:, keep].copy()
         ang = self.angular[keep]
         data[:, ang] = np.degrees(data[:, ang])
-        return [self.coordinate_names[k] for k in keep], data
+        labels = [self.coordinate_names[k] for k in keep]
+        if with_model_dofs and self.model_dof_values is not None:
+            extra = [
+                i for i in range(len(self.model_dof_names))
+                if np.isfinite(self.model_dof_values[:, i]).any()
+            ]  # fmt: skip
+            labels += [self.model_dof_names[i] for i in extra]
+            data = np.column_stack([data, np.degrees(self.model_dof_values[:, extra])])
+        return labels, data
 
     def write_mot(self, path: str | Path) -> Path:
-        """OpenSim ``.mot`` (degrees, pelvis in OpenSim's y-up ground; see coordinates)."""
+        """OpenSim ``.mot`` (degrees, pelvis in OpenSim's y-up ground; see coordinates):
+        OpenSim's coordinate names, then the model's own DOFs behind the computed ones
+        (``abdomen_*``, ``thorax_*``, ``cervical_*``, ``head_extension``, ``shoulder_*``),
+        so the same file poses mocapkit's exported model (:mod:`mocapkit.io.osim_model`)
+        exactly; OpenSim ignores columns a model does not have."""
         from mocapkit.io.opensim_table import write_table
 
-        labels, data = self._output_columns()
+        labels, data = self._output_columns(with_model_dofs=True)
         return write_table(path, self.time, labels, data, name="mocapkit_markers", in_degrees=True)
 
     def write_csv(self, path: str | Path) -> Path:
@@ -279,6 +303,26 @@ class ReconstructionResult:
             meta={"rate_hz": rate, "up_axis": "y"},
         )
         return write_trc(path, traj, rate_hz=rate)
+
+
+def _dofs_behind(
+    human: HumanModel, cmap: CoordinateMap, Q: FloatArray, coords: FloatArray
+) -> tuple[list[int], FloatArray]:
+    """The model DOFs (indices into ``q[7:]``) that reported coordinates are computed from
+    and that are not reported under their own name, and their values (N, k) [rad], NaN in
+    frames where any coordinate of their joint is NaN."""
+    reported = {a for kind, a, _ in cmap.source if kind == "dof"}
+    idx: list[int] = []
+    cols: list[FloatArray] = []
+    for c, ch in enumerate(cmap.chains):
+        ks = [k for k, (kind, a, _) in enumerate(cmap.source) if kind == "derived" and a == c]
+        undetermined = ~np.isfinite(coords[:, ks]).all(axis=1)
+        for d in ch.dofs:
+            if d in reported or d in idx:
+                continue
+            idx.append(d)
+            cols.append(np.where(undetermined, np.nan, Q[:, 7 + d]))
+    return idx, (np.column_stack(cols) if cols else np.zeros((len(Q), 0)))
 
 
 def unwrap_in_time(values: FloatArray, columns: Iterable[int]) -> FloatArray:
