@@ -108,8 +108,8 @@ def _joint(
     st = _sub(j, "SpatialTransform")
     axes = _axis_fill([np.asarray(a, dtype=float) for _, a, _, _ in rotations])
     for k in range(3):
-        cname = rotations[k][0] if k < len(rotations) else None
-        _transform_axis(st, f"rotation{k + 1}", axes[k], cname)
+        rname = rotations[k][0] if k < len(rotations) else None
+        _transform_axis(st, f"rotation{k + 1}", axes[k], rname)
     for k in range(3):
         tname = translations[k][0] if translations else None
         _transform_axis(st, f"translation{k + 1}", _UNIT[k], tname)
