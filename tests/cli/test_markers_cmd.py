@@ -83,3 +83,30 @@ def test_bad_arguments(gait: Path, tmp_path: Path, capsys: pytest.CaptureFixture
     )
     assert "no such marker file" in capsys.readouterr().err
     assert main(["markers", "reconstruct", trial]) == 2  # -o is required
+
+
+def test_tracked_c3d_overlays_the_trial_with_its_force_plates(
+    shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import numpy as np
+
+    from mocapkit.io.c3d import read_c3d
+
+    trial_path = shared_data / "c3d" / "walking2.c3d"
+    out = tmp_path / "tracked.c3d"
+    assert main([
+        "markers", "reconstruct", str(trial_path), "--markerset", "walking2", "--method",
+        "ik", "--start-s", "2.0", "--end-s", "2.4", "-o", str(tmp_path / "w.mot"),
+        "--tracked-c3d", str(out), "--json",
+    ]) == 0  # fmt: skip
+    figures = json.loads(capsys.readouterr().out)
+    tracked, trial = read_c3d(out), read_c3d(trial_path).between(2.0, 2.4)
+    assert tracked.n_frames == trial.n_frames
+    common = [n for n in tracked.names if n in trial.names]
+    d = np.linalg.norm(tracked.select(common).positions - trial.select(common).positions, axis=2)
+    # the same axes and units as the trial: the model's markers sit on the captured ones
+    # (mean distance = the fit's residual, a few mm; a wrong axis would be metres off)
+    assert np.nanmean(d) * 1000 < 2.0 * figures["marker_rms_mm"]
+    ex = tracked.meta["c3d"]
+    assert ex.analogs.shape == (trial.n_frames * 8, 12)
+    assert int(ex.groups["FORCE_PLATFORM"]["USED"][0]) == 2

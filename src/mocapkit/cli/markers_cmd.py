@@ -165,7 +165,14 @@ def register(subparsers: Any) -> None:
         "--tracked-trc",
         type=Path,
         default=None,
-        help="also write the model's tracked markers as TRC",
+        help="also write the model's tracked markers as TRC (OpenSim's y-up ground, mm)",
+    )
+    rec.add_argument(
+        "--tracked-c3d",
+        type=Path,
+        default=None,
+        help="also write the model's tracked markers as C3D, in the trial's axes, with a "
+        "C3D trial's analogs, force platforms and events",
     )
     rec.add_argument(
         "--json",
@@ -245,6 +252,8 @@ def _reconstruct(args: argparse.Namespace) -> int:
         result.write_csv(args.output)
     if args.tracked_trc is not None:
         result.write_tracked_trc(args.tracked_trc)
+    if args.tracked_c3d is not None:
+        result.write_tracked_c3d(args.tracked_c3d)
     m = result.metrics()
     seconds = process_seconds()
     m["fps"] = round(m["frames"] / seconds, 1) if seconds > 0 else None
@@ -295,7 +304,17 @@ def _inspect(args: argparse.Namespace) -> int:
         "gaps": len(gaps),
         "never_visible": never,
         "dropped_unlabelled": traj.meta.get("dropped_unlabelled", []),
+        "truncated": traj.meta.get("truncated"),
     }
+    extras = traj.meta.get("c3d")
+    if extras is not None:
+        info["analog_channels"] = list(extras.analog_labels)
+        info["analog_rate_hz"] = extras.analog_rate_hz
+        fp = extras.groups.get("FORCE_PLATFORM", {})
+        info["force_plates"] = int(np.asarray(fp.get("USED", [0])).reshape(-1)[0]) if fp else 0
+        info["events"] = [
+            {"label": e.label, "context": e.context, "time_s": e.time_s} for e in extras.events
+        ]
     if args.json:
         print_json(info)
     else:

@@ -366,6 +366,9 @@ def reconstruct(
         with_total=options.total_bound, P=P,
     )  # fmt: skip
     result.rate_hz = rate
+    result.meta["file_up_axis"] = trial.meta.get("converted_from_up_axis", "z")
+    if trial.meta.get("c3d") is not None:
+        result.meta["c3d"] = trial.meta["c3d"]
     if not np.isfinite(result.coordinates[:, result.fitted_angles]).any():
         raise DataError(
             f"the {len(tracked)} tracked markers ({', '.join(tracked[:8])}"

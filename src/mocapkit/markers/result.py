@@ -285,6 +285,21 @@ class ReconstructionResult:
         np.savetxt(p, rows, delimiter=",", header=",".join(header), comments="", fmt="%.8g")
         return p
 
+    def write_tracked_c3d(self, path: str | Path) -> Path:
+        """The model's markers as a C3D file (mm) in the trial file's own axes, so it
+        overlays the captured markers; a C3D trial's analogs, force platforms and events
+        are written with them (:func:`mocapkit.io.c3d.write_c3d`)."""
+        from mocapkit.io.c3d import C3DExtras, write_c3d
+        from mocapkit.markers.trajectories import MarkerTrajectories
+
+        rate = self.rate_hz or (1.0 / float(np.median(np.diff(self.time))))
+        traj = MarkerTrajectories(
+            self.time, self.tracked_positions @ _file_axes(self).T, self.marker_names,
+            meta={"rate_hz": rate},
+        )  # fmt: skip
+        extras = self.meta.get("c3d")
+        return write_c3d(path, traj, extras if isinstance(extras, C3DExtras) else None)
+
     def write_tracked_trc(self, path: str | Path) -> Path:
         """The model's markers over time as a TRC file (mm) in OpenSim's y-up ground, the
         frame of the .mot's pelvis columns (``v_os = (x, z, -y)`` of our z-up world), at
@@ -334,6 +349,13 @@ def unwrap_in_time(values: FloatArray, columns: Iterable[int]) -> FloatArray:
         if fin.size > 1:
             out[fin, k] = np.unwrap(out[fin, k])
     return out
+
+
+def _file_axes(result: ReconstructionResult) -> FloatArray:
+    """R with x_file = R x_zup for the trial's file axes (``meta["file_up_axis"]``)."""
+    from mocapkit.markers.conventions import rotation_to_z_up
+
+    return rotation_to_z_up(str(result.meta.get("file_up_axis") or "z")).T
 
 
 def marker_positions(human: HumanModel, names: Sequence[str], Q: FloatArray) -> FloatArray:
