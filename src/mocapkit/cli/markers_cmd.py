@@ -155,6 +155,13 @@ def register(subparsers: Any) -> None:
         help="output joint angles: .mot (OpenSim) or .csv",
     )
     rec.add_argument(
+        "--save-markerset",
+        type=Path,
+        default=None,
+        help="also save the marker set used (a preset, or the one assigned automatically "
+        "to labels no preset knows) as YAML, to check, edit and pass with --markerset",
+    )
+    rec.add_argument(
         "--osim",
         type=Path,
         default=None,
@@ -242,6 +249,10 @@ def _reconstruct(args: argparse.Namespace) -> int:
     if suffix not in (".mot", ".csv"):
         raise ConfigError(f"-o {args.output}: expected a .mot or .csv file name")
     result, subject, _ = _run(args)
+    if args.save_markerset is not None:
+        from mocapkit.body.markersets import save_markerset
+
+        save_markerset(subject.markerset, args.save_markerset)
     if args.osim is not None:
         from mocapkit.io.osim_model import write_osim
 
