@@ -8,7 +8,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from mocapkit.cli.common import EXIT_OK, print_json, process_seconds
+from mocapkit.cli.common import EXIT_OK, StepProgress, print_json, process_seconds
 from mocapkit.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -238,10 +238,11 @@ def _run(args: argparse.Namespace) -> Any:
         osc=OSCParams(substeps=args.substeps, backend=args.backend),
         ik=IKParams(backend=args.backend),
     )  # fmt: skip
-    return run(
-        args.trial, args.static, args.markerset, args.height_m, args.mass_kg, options, args.sex,
-        args.ik_setup,
-    )  # fmt: skip
+    with StepProgress() as bars:  # on stderr, when it is a terminal
+        return run(
+            args.trial, args.static, args.markerset, args.height_m, args.mass_kg, options,
+            args.sex, args.ik_setup, progress=bars,
+        )  # fmt: skip
 
 
 def _reconstruct(args: argparse.Namespace) -> int:

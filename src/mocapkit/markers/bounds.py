@@ -33,7 +33,7 @@ marker errors to first order.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -327,6 +327,7 @@ def bound_report(
     with_total: bool = True,
     coords: FloatArray | None = None,
     per_frame: bool | None = None,
+    progress: Callable[[str, float, float], None] | None = None,
 ) -> BoundReport:
     """Apply rules 1-3 of the module docstring to a method's raw Δq (N, nv): ``root``,
     ``dofs`` from :func:`mocapkit.markers.determined.dof_determined`, ``held`` the
@@ -356,6 +357,8 @@ def bound_report(
         dc[a:b] = np.einsum("nkv,nv->nk", G, np.nan_to_num(out[a:b]))
         # a coordinate is capped if a model DOF it depends on was
         dep[a:b] = ((np.abs(G) > 1e-9) & capped_q[a:b, None, :]).any(axis=2)
+        if progress is not None:
+            progress("joint-error bounds", b, len(Q))
     dc[~cols] = np.nan
     cspan = np.full(len(cmap.names), np.inf)
     for k, (kind, a, _) in enumerate(cmap.source):
@@ -389,6 +392,10 @@ def bound_report(
     counts = {c: int(poor[:, k].sum()) for k, c in enumerate(cmap.names) if poor[:, k].any()}
     total = None
     if with_total:
+        if progress is not None:
+            progress("total bound (a fit per frame)", 0, 1)
         total = total_bound(human, cmap, names, Q, X, weights, free, rows & ~unobserved)
+        if progress is not None:
+            progress("total bound (a fit per frame)", 1, 1)
         total = np.minimum(total, cspan[None, :])
     return BoundReport(out, dc, capped, sens, counts, unobserved, total, per_frame)

@@ -549,6 +549,7 @@ def osc_trial(
     marker_joint: np.ndarray,
     marker_offset: FloatArray,
     q_init: FloatArray,
+    v_init: FloatArray,
     X: FloatArray,
     Xd: FloatArray,
     Xdd: FloatArray,
@@ -565,21 +566,26 @@ def osc_trial(
     gains: FloatArray,
     dt_frame: float,
     n_sub: int,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Run :func:`osc_frame` over a whole trial X (N, M, 3) with target velocities Xd and
-    accelerations Xdd (N, M, 3). Frame 0 starts from ``q_init`` at rest, holding frame 0.
-    Returns Q (N, nq), P (N, M, 3), ΔQ (N, nv), E (N, M).
+    first: int,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Run :func:`osc_frame` over frames ``first`` .. N-1 of X (N, M, 3) with target
+    velocities Xd and accelerations Xdd (N, M, 3), from the state ``q_init``, ``v_init``
+    at frame ``first - 1``; ``first = 0``: frame 0 starts from ``q_init`` at rest, holding
+    frame 0. Returns Q (n, nq), P (n, M, 3), ΔQ (n, nv), E (n, M) of those n = N - first
+    frames and the last velocity (nv,). A trial run in blocks (``first = 1`` on a block
+    that repeats the previous block's last frame) gives the same numbers as in one call.
     """
     N, M = X.shape[0], X.shape[1]
     nq = q_init.shape[0]
     nv = nq - 1
-    Q = np.empty((N, nq))
-    P = np.empty((N, M, 3))
-    DQ = np.empty((N, nv))
-    E = np.empty((N, M))
+    n = N - first
+    Q = np.empty((n, nq))
+    P = np.empty((n, M, 3))
+    DQ = np.empty((n, nv))
+    E = np.empty((n, M))
     q = q_init.copy()
-    v = np.zeros(nv)
-    for f in range(N):
+    v = v_init.copy()
+    for f in range(first, N):
         if f == 0:
             x0, xd0, xdd0 = X[0], np.zeros((M, 3)), np.zeros((M, 3))
         else:
@@ -589,8 +595,8 @@ def osc_trial(
             q, v, x0, X[f], xd0, xdd0, row_weight, level_ptr, level_markers, dof_ptr,
             dof_markers, lock_dof, lock_value, lower, upper, q_posture, gains, dt_frame, n_sub,
         )  # fmt: skip
-        Q[f] = q
-        P[f] = Pf
-        DQ[f] = dq
-        E[f] = e
-    return Q, P, DQ, E
+        Q[f - first] = q
+        P[f - first] = Pf
+        DQ[f - first] = dq
+        E[f - first] = e
+    return Q, P, DQ, E, v

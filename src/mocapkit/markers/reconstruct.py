@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -378,13 +378,23 @@ def _warm_up(
         )  # fmt: skip
 
 
+Progress = Callable[[str, float, float], None]  # (step, done, total): a progress bar
+
+
 def reconstruct(
     trial: MarkerTrajectories,
     subject: Subject,
     options: ReconstructionOptions,
     warnings: list[str] | None = None,
+    progress: Progress | None = None,
 ) -> ReconstructionResult:
-    """Joint angles for a prepared trial (metres, z-up, set names)."""
+    """Joint angles for a prepared trial (metres, z-up, set names); ``progress(step, done,
+    total)`` is told how the long steps advance."""
+
+    def solve_progress(done: int, total: int) -> None:
+        if progress is not None:
+            progress("reconstruction", done, total)
+
     warn = _Warnings(warnings or [])
     human, ms = subject.human, subject.markerset
     tasks, notes = resolve_coordinate_tasks(human, ms.coordinate_tasks)
@@ -417,7 +427,7 @@ def reconstruct(
     if options.method == "ik":
         sol = solve_ik(
             human, names, X, weights, q_init, tasks, q_posture=human.neutral(),
-            params=options.ik,
+            params=options.ik, progress=solve_progress,
         )  # fmt: skip
         elapsed = time.perf_counter() - t0
         Q = sol.q
@@ -438,13 +448,13 @@ def reconstruct(
         else:
             Q, P, dq, _ = reconstruct_offline(
                 human, names, X, rate, levels, tasks, q_init, human.neutral(),
-                options.osc, wmap,
+                options.osc, wmap, progress=solve_progress,
             )  # fmt: skip
             elapsed = time.perf_counter() - t0
     result = ReconstructionResult.build(
         trial.time, human, names, tracked, X, Q, dq, elapsed, options.method, options.mode,
         [list(level) for level in levels], tasks, warn, weights,
-        with_total=options.total_bound, P=P,
+        with_total=options.total_bound, P=P, progress=progress,
     )  # fmt: skip
     result.rate_hz = rate
     result.meta["file_up_axis"] = trial.meta.get("converted_from_up_axis", "z")
@@ -550,6 +560,7 @@ def run(
     options: ReconstructionOptions | None = None,
     sex: Sex = "male",
     ik_setup: str | Path | None = None,
+    progress: Progress | None = None,
 ) -> tuple[ReconstructionResult, Subject, CleaningReport]:
     """Files to joint angles: load, check, clean, calibrate, reconstruct.
 
@@ -601,7 +612,7 @@ def run(
         )
         scale_static = None
     subject = calibrate(scale_static, trial, ms, height_m, mass_kg, sex)
-    result = reconstruct(trial, subject, opts, list(warn))
+    result = reconstruct(trial, subject, opts, list(warn), progress)
     result.meta.update(
         {
             "marker_set": ms.name,

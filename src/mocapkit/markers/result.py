@@ -12,7 +12,7 @@ of the figures' means and maxima, and counted in a warning.
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -101,6 +101,7 @@ class ReconstructionResult:
         weights: FloatArray | None = None,
         with_total: bool = True,
         P: FloatArray | None = None,
+        progress: Callable[[str, float, float], None] | None = None,
     ) -> ReconstructionResult:
         """Errors, named coordinates (NaN where undetermined) and the bound's report;
         ``weights`` (M,) of ``names`` (default 1) weigh the conditioning's fit;
@@ -120,6 +121,7 @@ class ReconstructionResult:
         report = bound_report(
             human, cmap, names, Q, X, np.where(in_fit, w, 0.0), dq, root, dofs,
             held=list(locked), columns=det, with_total=with_total, coords=coords,
+            progress=progress,
         )  # fmt: skip
         structural = det
         det = det & ~report.unobserved
