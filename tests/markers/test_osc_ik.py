@@ -174,7 +174,7 @@ def test_osc_follows_through_joint_limits_like_ik() -> None:
     n = 120
     t = np.arange(n) / RATE
     Q = np.tile(human.neutral(), (n, 1))
-    lo, hi = human.dof_limits()
+    lo, _hi = human.dof_limits()
     k_elbow = human.dof_index("elbow_flex_r") + 1
     k_knee = human.dof_index("knee_angle_l") + 1
     # elbow: 80 deg -> its lower limit (held 0.5 s) -> 80 deg; knee: to 150 deg and back
