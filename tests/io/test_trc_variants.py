@@ -119,3 +119,22 @@ def test_opensim_reads_what_we_write_with_gaps(tmp_path: Path) -> None:
     md = osim.MarkerData(str(p))
     assert md.getNumFrames() == traj.n_frames
     assert md.getDataRate() == pytest.approx(60.0)
+
+
+def test_numba_parser_equals_numpy_on_text_numbers() -> None:
+    from mocapkit.io._parse_kernels import parse_floats
+
+    rng = np.random.default_rng(5)
+    vals = rng.normal(scale=10.0 ** rng.integers(-6, 6, 3000), size=3000)
+    cells = [f"{v:.6f}" for v in vals[:1000]] + [f"{v:.9g}" for v in vals[1000:2000]]
+    cells += [f"{v:.4E}" for v in vals[2000:]] + ["NaN", "nan", "-nan", "+1.5", "7"]
+    text = "\t".join(cells) + "\n"
+    out = np.empty(len(cells))
+    n = parse_floats(np.frombuffer(text.encode(), dtype=np.uint8), out)
+    ref = np.array([float(c) for c in cells])
+    assert n == len(cells)
+    # up to 15 significant digits the parse is exact (integer mantissa, exact powers of 10)
+    np.testing.assert_array_equal(out, ref)
+    bad = "1.0\t2x\t3\n".encode()
+    assert parse_floats(np.frombuffer(bad, dtype=np.uint8), np.empty(3)) == -1 - 4
+    assert parse_floats(np.frombuffer(b"1 2 3", dtype=np.uint8), np.empty(2)) < 0  # no room

@@ -184,8 +184,9 @@ class ReferenceStepper:
         dq = np.zeros(nv)
         for j in range(n_sub):
             s = j * dt
-            Amat = pin.crba(model, data, q).copy()
-            h = pin.nonLinearEffects(model, data, q, v).copy()
+            if j == 0:  # the kernel's: rigid-body terms once per capture frame
+                Amat = pin.crba(model, data, q).copy()
+                h = pin.nonLinearEffects(model, data, q, v).copy()
             P, J = self.kin.reference_positions_jacobians(q)
             B = self.kin.reference_bias(q, v)
             Jm: list[FloatArray] = []

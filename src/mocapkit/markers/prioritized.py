@@ -253,6 +253,7 @@ def prioritized_torque_single(
     dx: FloatArray,
     want_bound: bool,
     damping: float,
+    Ainv: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """:func:`prioritized_torque` for the levels direct marker control uses by default, the
     same numbers by a cheaper route: [held DOFs ``lock_cols`` (velocity indices) at the
@@ -271,12 +272,14 @@ def prioritized_torque_single(
     with λ₁² = 1e-10 ‖E L_A⁻ᵀ‖² and λ² = (damping / R + 1e-10) ‖J L_A⁻ᵀ‖² as there
     (‖·‖: Frobenius; ‖J L_A⁻ᵀ‖² = Σ (A⁻¹ ∘ JᵀJ)). A Cholesky of the free block replaces
     the eigen-decompositions and the R × nv products in y; tests check both routes agree.
-    Needs R > 0 (no marker row: use :func:`prioritized_torque`)."""
+    Needs R > 0 (no marker row: use :func:`prioritized_torque`). ``Ainv``: A⁻¹ when the
+    caller has it (else computed from L_A)."""
     nv = Amat.shape[0]
     R = J.shape[0]
     nl = lock_cols.shape[0]
-    LAi = tri_inverse_lower(LA)
-    Ainv = np.ascontiguousarray(LAi.T) @ LAi
+    if Ainv is None:
+        LAi = tri_inverse_lower(LA)
+        Ainv = np.ascontiguousarray(LAi.T) @ LAi
     x = -(Ainv @ h)
     is_lock = np.zeros(nv, dtype=np.bool_)
     for c in range(nl):
