@@ -254,7 +254,9 @@ def write_section(text: str) -> None:
         body = body[:start] + text + ("" if nxt < 0 else body[nxt + 1 :])
     else:
         anchor = body.find("\n## Marker reconstruction through gaps")
-        body = (body + "\n" + text) if anchor < 0 else body[: anchor + 1] + text + body[anchor + 1 :]
+        body = (
+            (body + "\n" + text) if anchor < 0 else body[: anchor + 1] + text + body[anchor + 1 :]
+        )
     DOCS.write_text(body)
 
 

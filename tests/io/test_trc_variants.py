@@ -135,6 +135,6 @@ def test_numba_parser_equals_numpy_on_text_numbers() -> None:
     assert n == len(cells)
     # up to 15 significant digits the parse is exact (integer mantissa, exact powers of 10)
     np.testing.assert_array_equal(out, ref)
-    bad = "1.0\t2x\t3\n".encode()
+    bad = b"1.0\t2x\t3\n"
     assert parse_floats(np.frombuffer(bad, dtype=np.uint8), np.empty(3)) == -1 - 4
     assert parse_floats(np.frombuffer(b"1 2 3", dtype=np.uint8), np.empty(2)) < 0  # no room

@@ -240,6 +240,20 @@ def _chol_solve_vec(L: FloatArray, b: FloatArray) -> FloatArray:
 
 
 @njit(cache=True)
+def _small_cholesky(S: FloatArray) -> FloatArray:
+    """Lower Cholesky factor of a small positive definite matrix."""
+    n = S.shape[0]
+    L = np.zeros((n, n))
+    for i in range(n):
+        for k in range(i + 1):
+            acc = S[i, k]
+            for m in range(k):
+                acc -= L[i, m] * L[k, m]
+            L[i, k] = np.sqrt(acc) if i == k else acc / L[k, k]
+    return L
+
+
+@njit(cache=True)
 def prioritized_torque_single(
     Amat: FloatArray,
     LA: FloatArray,
@@ -292,7 +306,7 @@ def prioritized_torque_single(
     for a in range(nl):
         for c in range(nl):
             S[a, c] = Ainv[lock_cols[a], lock_cols[c]]
-    Sinv = np.zeros((nl, nl))
+    LS = np.zeros((nl, nl))
     if nl > 0:
         scale1 = 0.0
         for c in range(nl):
@@ -303,8 +317,10 @@ def prioritized_torque_single(
         res1 = np.empty(nl)
         for c in range(nl):
             res1[c] = lock_acc[c] - x[lock_cols[c]]
-        x = x + AinvEt @ np.linalg.solve(Sd, res1)
-        Sinv[:, :] = np.linalg.inv(S)
+        # E A⁻¹ Eᵀ is small (the held DOFs) and positive definite: Cholesky by hand, no
+        # LAPACK call overhead
+        x = x + AinvEt @ _chol_solve_vec(_small_cholesky(Sd), res1)
+        LS = _small_cholesky(S)
     free = np.empty(nv - nl, dtype=np.int64)
     n_f = 0
     for i in range(nv):
@@ -343,7 +359,7 @@ def prioritized_torque_single(
         Ed = np.empty(nl)
         for c in range(nl):
             Ed[c] = d[lock_cols[c]]
-        d = d - AinvEt @ np.ascontiguousarray(Sinv @ Ed)
+        d = d - AinvEt @ _chol_solve_vec(LS, Ed)
     for a in range(n_f):
         acc_a = 0.0
         for c in range(n_f):
