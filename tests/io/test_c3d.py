@@ -138,3 +138,15 @@ def test_more_frames_than_ezc3d_reads_back_are_refused(tmp_path: Path) -> None:
     ok = MarkerTrajectories(np.arange(65535) / 100.0, rng.normal(size=(65535, 1, 3)), ("A",),
                             meta={"rate_hz": 100.0})  # fmt: skip
     assert read_c3d(write_c3d(tmp_path / "max.c3d", ok)).n_frames == 65535
+
+
+def test_unknown_unit_names_the_field_and_the_fix(tmp_path: Path) -> None:
+    import ezc3d
+
+    p = write_c3d(tmp_path / "u.c3d", _traj())
+    c3d = ezc3d.c3d(str(p))
+    c3d["parameters"]["POINT"]["UNITS"]["value"] = ["in"]
+    c3d.write(str(tmp_path / "inches.c3d"))
+    with pytest.raises(FileFormatError, match=r"POINT:UNITS: unknown length unit 'in'.*--units"):
+        read_c3d(tmp_path / "inches.c3d")
+    assert read_c3d(tmp_path / "inches.c3d", units="mm").n_markers == 3  # the override

@@ -221,7 +221,9 @@ def read_c3d(path: str | Path, units: str | None = None) -> MarkerTrajectories:
         raise FileFormatError(f"{p}: POINT:RATE is {rate}; pass the frame rate explicitly")
     declared = units or (point["UNITS"]["value"][0] if point["UNITS"]["value"] else "")
     if not declared:
-        raise FileFormatError(f"{p}: POINT:UNITS is empty; pass units='mm' (or 'm')")
+        raise FileFormatError(
+            f"{p}: POINT:UNITS is empty; pass the file's unit (--units mm|cm|m, or units=...)"
+        )
     scale = length_scale(declared, f"{p}: POINT:UNITS")
     pts = np.asarray(c3d["data"]["points"], dtype=float)[:3]  # (3, M, N)
     n = pts.shape[2]
