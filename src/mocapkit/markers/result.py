@@ -296,8 +296,8 @@ class ReconstructionResult:
 
         rate = self.rate_hz or (1.0 / float(np.median(np.diff(self.time))))
         traj = MarkerTrajectories(
-            self.time, self.tracked_positions @ _file_axes(self).T, self.marker_names,
-            meta={"rate_hz": rate},
+            _exact_times(self.time, rate), self.tracked_positions @ _file_axes(self).T,
+            self.marker_names, meta={"rate_hz": rate},
         )  # fmt: skip
         extras = self.meta.get("c3d")
         return write_c3d(path, traj, extras if isinstance(extras, C3DExtras) else None)
@@ -314,7 +314,7 @@ class ReconstructionResult:
         if rate is None:
             rate = 1.0 / float(np.median(np.diff(self.time))) if self.n_frames > 1 else 0.0
         traj = MarkerTrajectories(
-            self.time,
+            _exact_times(self.time, rate),
             self.tracked_positions @ Z_UP_TO_OPENSIM.T,
             self.marker_names,
             meta={"rate_hz": rate, "up_axis": "y"},
@@ -351,6 +351,13 @@ def unwrap_in_time(values: FloatArray, columns: Iterable[int]) -> FloatArray:
         if fin.size > 1:
             out[fin, k] = np.unwrap(out[fin, k])
     return out
+
+
+def _exact_times(time: FloatArray, rate: float) -> FloatArray:
+    """``time[0] + k / rate`` when ``time`` is that clock to a quarter frame (a time column
+    rounded to a few decimals in the input file), else ``time``."""
+    regular = time[0] + np.arange(len(time)) / rate
+    return regular if np.abs(time - regular).max() <= 0.25 / rate else np.asarray(time)
 
 
 def _file_axes(result: ReconstructionResult) -> FloatArray:
