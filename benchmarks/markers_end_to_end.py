@@ -243,6 +243,16 @@ NOTES = [
     "degrees, both fit the markers equally and differ in how a raised arm's rotation is "
     "split between the shoulder girdle and the shoulder (the arm_* angles of a near-"
     "gimbal pose), not in tracking.",
+    '- "Frames with a DOF at a limit": direct marker control rests the spine\'s redundant '
+    "DOFs at their limits more often than IK (walking2: thorax_rotation; the reported "
+    "lumbar_* angles are computed over the whole spine and do not depend on the split). "
+    "IK's posture prior spreads the rotation; OSC's posture task acts only in the markers' "
+    "null space. Releasing such DOFs by the full solution instead of the markers' push was "
+    "tried and made CMU 85_12 worse (20.2 vs 18.9 mm), so the rule stays.",
+    "- Where we are short: the long trial's target was 20x OpenSim's whole process; this "
+    "run's ratio is in the table. About 1.2 s of every run is fixed (Python, numpy, "
+    "Pinocchio, numba and SciPy's BLAS, numba's cached kernels, the scaling), and direct "
+    "marker control costs ~200 us a frame (two simulation substeps of a 48-DOF body).",
 ]
 
 

@@ -365,7 +365,7 @@ def render(
     ]
     for r in c3d_rows:
         lines.append(
-            f"| {r['trial']} | {r['method']} | {r['frames']} | {r['fps']:.0f} | "
+            f"| {r['trial']} | {r['method']} | {r['frames']} | {r['solve_fps']:.0f} | "
             f"{r['marker_rms_mm']:.1f} | {r['marker_max_mm']:.1f} | "
             f"{r['joint_error_bound_deg_max']:.2f} |"
         )
