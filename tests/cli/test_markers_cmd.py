@@ -48,8 +48,18 @@ def test_report_and_inspect(gait: Path, tmp_path: Path, capsys: pytest.CaptureFi
     ])  # fmt: skip
     assert code == 0
     summary = json.loads(capsys.readouterr().out)
-    assert summary["levels"] == [["R.Acromium", "L.Wrist.Lat"], ["L.Elbow", "R.Wrist.Lat"]]
+    assert summary["levels"][:2] == [["R.Acromium", "L.Wrist.Lat"], ["L.Elbow", "R.Wrist.Lat"]]
+    assert len(summary["levels"]) == 3  # the paper's two subsets, then every other marker
+    # issue 12: the paper's grouping gave all-NaN angles and a bound of 0.0; the held
+    # subtalar/mtp (bound 0 by construction) no longer count
+    assert summary["metrics"]["joint_error_bound_deg_max"] > 0.0
     assert (tmp_path / "rep" / "fig3_markers.png").is_file()
+    assert main([
+        "markers", "report", str(gait / "subject01_walk1.trc"), "--static",
+        str(gait / "subject01_static.trc"), "--grouping", "paper-only", "--end-s", "0.5",
+        "-o", str(tmp_path / "rep2"),
+    ]) == 1  # fmt: skip
+    assert "determine no joint angle of the model" in capsys.readouterr().err
     assert main(["markers", "inspect", str(gait / "subject01_walk1.trc"), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["frames"] == 151
@@ -73,3 +83,30 @@ def test_bad_arguments(gait: Path, tmp_path: Path, capsys: pytest.CaptureFixture
     )
     assert "no such marker file" in capsys.readouterr().err
     assert main(["markers", "reconstruct", trial]) == 2  # -o is required
+
+
+def test_tracked_c3d_overlays_the_trial_with_its_force_plates(
+    shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import numpy as np
+
+    from mocapkit.io.c3d import read_c3d
+
+    trial_path = shared_data / "c3d" / "walking2.c3d"
+    out = tmp_path / "tracked.c3d"
+    assert main([
+        "markers", "reconstruct", str(trial_path), "--markerset", "walking2", "--method",
+        "ik", "--start-s", "2.0", "--end-s", "2.4", "-o", str(tmp_path / "w.mot"),
+        "--tracked-c3d", str(out), "--json",
+    ]) == 0  # fmt: skip
+    figures = json.loads(capsys.readouterr().out)
+    tracked, trial = read_c3d(out), read_c3d(trial_path).between(2.0, 2.4)
+    assert tracked.n_frames == trial.n_frames
+    common = [n for n in tracked.names if n in trial.names]
+    d = np.linalg.norm(tracked.select(common).positions - trial.select(common).positions, axis=2)
+    # the same axes and units as the trial: the model's markers sit on the captured ones
+    # (mean distance = the fit's residual, a few mm; a wrong axis would be metres off)
+    assert np.nanmean(d) * 1000 < 2.0 * figures["marker_rms_mm"]
+    ex = tracked.meta["c3d"]
+    assert ex.analogs.shape == (trial.n_frames * 8, 12)
+    assert int(ex.groups["FORCE_PLATFORM"]["USED"][0]) == 2

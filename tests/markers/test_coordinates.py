@@ -138,3 +138,26 @@ def test_other_models_conventions() -> None:
     np.testing.assert_array_equal(same, out)
     with pytest.raises(ConfigError, match="reference model 'opensim3'"):
         to_rajagopal(labels, gait, "opensim3")
+
+
+def test_pelvis_rotation_is_continuous_when_the_subject_turns() -> None:
+    """A subject turning 1.5 times on the spot: pelvis_rotation runs 0 -> 540 deg in the
+    outputs (no jump at +-180), the model's own configuration being the same."""
+    from mocapkit.geometry import quat_from_axis_angle, quat_to_xyzw
+    from mocapkit.markers.result import ReconstructionResult
+    from tests.markers import synthetic
+
+    human, ms = synthetic.subject(1.8)
+    names = list(ms.names)
+    n = 61
+    yaw = np.radians(np.linspace(0.0, 540.0, n))
+    Q = np.tile(human.neutral(), (n, 1))
+    Q[:, 3:7] = quat_to_xyzw(quat_from_axis_angle([0.0, 0.0, 1.0], yaw))
+    X = synthetic.markers(human, names, Q)
+    res = ReconstructionResult.build(
+        np.arange(n) / 60.0, human, names, names, X, Q, np.zeros((n, human.nv)), 1.0, "ik",
+        "offline", [names], {}, [], with_total=False,
+    )  # fmt: skip
+    rot = np.degrees(res.column("pelvis_rotation"))
+    # exact poses: the reported angle is the yaw itself, to rounding
+    np.testing.assert_allclose(rot, np.degrees(yaw), atol=1e-6)

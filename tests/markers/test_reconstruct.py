@@ -65,6 +65,11 @@ def test_outputs(gait_runs: dict, tmp_path: Path) -> None:
     assert csv[0].startswith("time_s,pelvis_tx_m,")
     back = read_trc(result.write_tracked_trc(tmp_path / "t.trc"))
     assert back.n_markers == len(result.marker_names)
+    # TRC as OpenSim expects it: y up (the head above the heels), the trial's exact rate
+    # (its time column is rounded to 0.017 s: 1 / median dt would say 58.8 Hz)
+    assert back.rate_hz == 60.0
+    assert (back.marker("Top.Head")[:, 1] - back.marker("R.Heel")[:, 1] > 1.3).all()
+    np.testing.assert_allclose(np.diff(back.time), 1.0 / 60.0, atol=1e-9)
     summary = write_report(result, tmp_path / "rep")
     assert set(summary["figures"]) == {
         "fig2_joint_angles.png",

@@ -108,6 +108,7 @@ def _side_sign(side: str) -> float:
 # OpenSim's body frames (x fwd, y up, z right), the numbers of the body presets' elbow_r.
 _ELBOW_AXIS_OPENSIM = (0.226, 0.0223, 0.9739)
 _PRO_SUP_AXIS_OPENSIM = (0.0564, 0.9984, 0.002)
+KNEE_FLEXION_MAX_DEG = 160.0
 # Rajagopal's walker_knee_r flexion axis (in the femur; 4 deg from gait2392's pure z, and
 # pointing the other way: knee_angle is positive in flexion), as the body presets' tibia_r.
 _KNEE_AXIS_OPENSIM = (0.0, -0.0707, -0.9975)
@@ -256,7 +257,10 @@ def _joints(height_m: float, sex: Sex) -> list[JointSpec]:
                 f"thigh_{s}",
                 f"shank_{s}",
                 (0.0, 0.0, -L["thigh"]),
-                (Dof(f"knee_angle_{s}", _axis(_KNEE_AXIS_OPENSIM, m), -10, 135),),
+                # 160 deg: deep squatting and kneeling reach 150-160 deg (Hemmerich et al.
+                # 2006, high range of motion activities); at 135 both IK and direct marker
+                # control pinned CMU 85_12's knees at the limit for 240 frames
+                (Dof(f"knee_angle_{s}", _axis(_KNEE_AXIS_OPENSIM, m), -10, KNEE_FLEXION_MAX_DEG),),
             ),
             JointSpec(
                 f"ankle_{s}",

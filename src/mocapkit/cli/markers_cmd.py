@@ -8,7 +8,7 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from mocapkit.cli.common import EXIT_OK, print_json, process_seconds
+from mocapkit.cli.common import EXIT_OK, StepProgress, print_json, process_seconds
 from mocapkit.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -45,7 +45,8 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         "--grouping",
         default="single",
         help="marker priority levels for osc: single, independent, tree, weights, "
-        "paper, or a YAML file (default: single)",
+        "paper (the paper's two subsets above all other markers), paper-only (the paper's "
+        "four markers alone), or a YAML file (default: single)",
     )
     p.add_argument(
         "--height-m",
@@ -154,10 +155,31 @@ def register(subparsers: Any) -> None:
         help="output joint angles: .mot (OpenSim) or .csv",
     )
     rec.add_argument(
+        "--save-markerset",
+        type=Path,
+        default=None,
+        help="also save the marker set used (a preset, or the one assigned automatically "
+        "to labels no preset knows) as YAML, to check, edit and pass with --markerset",
+    )
+    rec.add_argument(
+        "--osim",
+        type=Path,
+        default=None,
+        help="also write the scaled model (bodies, joints, registered markers) as an "
+        "OpenSim .osim that the .mot poses",
+    )
+    rec.add_argument(
         "--tracked-trc",
         type=Path,
         default=None,
-        help="also write the model's tracked markers as TRC",
+        help="also write the model's tracked markers as TRC (OpenSim's y-up ground, mm)",
+    )
+    rec.add_argument(
+        "--tracked-c3d",
+        type=Path,
+        default=None,
+        help="also write the model's tracked markers as C3D, in the trial's axes, with a "
+        "C3D trial's analogs, force platforms and events",
     )
     rec.add_argument(
         "--json",
@@ -216,23 +238,34 @@ def _run(args: argparse.Namespace) -> Any:
         osc=OSCParams(substeps=args.substeps, backend=args.backend),
         ik=IKParams(backend=args.backend),
     )  # fmt: skip
-    return run(
-        args.trial, args.static, args.markerset, args.height_m, args.mass_kg, options, args.sex,
-        args.ik_setup,
-    )  # fmt: skip
+    with StepProgress() as bars:  # on stderr, when it is a terminal
+        return run(
+            args.trial, args.static, args.markerset, args.height_m, args.mass_kg, options,
+            args.sex, args.ik_setup, progress=bars,
+        )  # fmt: skip
 
 
 def _reconstruct(args: argparse.Namespace) -> int:
     suffix = args.output.suffix.lower()
     if suffix not in (".mot", ".csv"):
         raise ConfigError(f"-o {args.output}: expected a .mot or .csv file name")
-    result, _, _ = _run(args)
+    result, subject, _ = _run(args)
+    if args.save_markerset is not None:
+        from mocapkit.body.markersets import save_markerset
+
+        save_markerset(subject.markerset, args.save_markerset)
+    if args.osim is not None:
+        from mocapkit.io.osim_model import write_osim
+
+        write_osim(args.osim, subject.human)
     if suffix == ".mot":
         result.write_mot(args.output)
     else:
         result.write_csv(args.output)
     if args.tracked_trc is not None:
         result.write_tracked_trc(args.tracked_trc)
+    if args.tracked_c3d is not None:
+        result.write_tracked_c3d(args.tracked_c3d)
     m = result.metrics()
     seconds = process_seconds()
     m["fps"] = round(m["frames"] / seconds, 1) if seconds > 0 else None
@@ -283,7 +316,17 @@ def _inspect(args: argparse.Namespace) -> int:
         "gaps": len(gaps),
         "never_visible": never,
         "dropped_unlabelled": traj.meta.get("dropped_unlabelled", []),
+        "truncated": traj.meta.get("truncated"),
     }
+    extras = traj.meta.get("c3d")
+    if extras is not None:
+        info["analog_channels"] = list(extras.analog_labels)
+        info["analog_rate_hz"] = extras.analog_rate_hz
+        fp = extras.groups.get("FORCE_PLATFORM", {})
+        info["force_plates"] = int(np.asarray(fp.get("USED", [0])).reshape(-1)[0]) if fp else 0
+        info["events"] = [
+            {"label": e.label, "context": e.context, "time_s": e.time_s} for e in extras.events
+        ]
     if args.json:
         print_json(info)
     else:

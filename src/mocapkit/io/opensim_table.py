@@ -4,6 +4,12 @@ columns as written by OpenSense, ``w,x,y,z`` in one tab-separated cell).
 A table is ``time`` (N,) plus named columns. Angles in ``.mot`` files are in degrees
 when the header says ``inDegrees=yes``; :func:`read_table` returns what the file
 holds and reports ``in_degrees`` so callers convert at the edge.
+
+Written as OpenSim 4's own ``STOFileAdapter`` writes (``version=3``, ``DataType``), with
+missing values as ``nan``: OpenSim's ``TimeSeriesTable`` and its ``Storage`` (the GUI's
+Load Motion) then both read every row. A ``version=1`` header sends ``Storage`` to its
+legacy stream reader, which stops at the first ``nan`` and silently keeps the rows before
+it (tests/io/test_opensim_round_trips.py runs both readers).
 """
 
 from __future__ import annotations
@@ -75,7 +81,7 @@ def write_table(
         if not label or any(c in label for c in "\t\n"):
             raise ShapeError(f"labels[{i}]: {label!r} is not a valid column name")
     p = Path(path)
-    lines = [name, "version=1" if not quat else "version=3"]
+    lines = [name, "version=3"]
     if quat:
         rate = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 0.0
         lines += [
@@ -86,14 +92,16 @@ def write_table(
     else:
         lines += [f"nRows={t.shape[0]}", f"nColumns={len(labels) + 1}"]
         lines.append(f"inDegrees={'yes' if in_degrees else 'no'}")
+        lines.append(f"DataType={data_type or 'double'}")
     lines.append("endheader")
     lines.append("\t".join(["time", *labels]))
-    for i in range(t.shape[0]):
-        if quat:
+    if quat:
+        for i in range(t.shape[0]):
             cells = [",".join(f"{v:.10g}" for v in d[i, j]) for j in range(len(labels))]
-        else:
-            cells = [f"{v:.10g}" for v in d[i]]
-        lines.append("\t".join([f"{t[i]:.10g}", *cells]))
+            lines.append("\t".join([f"{t[i]:.10g}", *cells]))
+    else:
+        fmt = "\t".join(["%.10g"] * (len(labels) + 1))
+        lines += [fmt % tuple(row) for row in np.column_stack([t, d]).tolist()]
     p.write_text("\n".join(lines) + "\n")
     return p
 

@@ -1,13 +1,28 @@
-"""TRC marker files (OpenSim, Motion Analysis, Cortex): read and write.
+"""TRC marker files (OpenSim, Motion Analysis, Cortex, Vicon/Qualisys exports): read and write.
 
-Read: the declared ``Units`` are converted to metres, the axes are kept as in the
-file (OpenSim's TRC files are y-up: ``meta["up_axis"] = "y"`` is only a hint, the
-reconstruction checks it against the static trial), empty cells become NaN.
-Write: millimetres, tab-separated, the layout OpenSim reads.
+Read: every variant OpenSim's own examples carry (tests/data/trc): header values separated
+by one or several tabs or padded with spaces (``"  100.0\\t\\t  100.0"``), trailing tabs,
+marker labels separated by extra tabs, blank or tab-only lines before the data, CRLF line
+ends, E-notation, gaps written as empty cells, ``NaN``/``nan``/``NAN`` or ``"   NaN"``,
+rows whose trailing empty cells were dropped, negative times. The declared ``Units`` are
+converted to metres, the axes are kept as in the file (OpenSim's TRC files are y-up:
+``meta["up_axis"] = "y"`` is a hint the reconstruction checks against the static trial).
+The rate is the header's ``DataRate`` (the time column is often rounded to a few decimals:
+1/60 s written as 0.017 would otherwise read as 58.8 Hz); a time column that drifts from
+``time[0] + k / DataRate`` by more than a quarter frame is another clock (a resampled
+file): it is then used, and the disagreement reported. A file with fewer rows than
+``NumFrames`` says so.
+
+Write: tab-separated, the layout OpenSim 4's ``TRCFileAdapter`` reads (every row has
+exactly ``2 + 3 M`` cells: gaps are written ``NaN``, since that reader drops trailing empty
+cells and then refuses the row), times ``first + k / rate`` to 1e-9 s.
 """
 
 from __future__ import annotations
 
+import logging
+import re
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +31,8 @@ import numpy as np
 from mocapkit.errors import FileFormatError
 from mocapkit.io.units import length_scale
 from mocapkit.markers.trajectories import MarkerTrajectories
+
+log = logging.getLogger(__name__)
 
 _HEADER_KEYS = (
     "DataRate",
@@ -27,13 +44,104 @@ _HEADER_KEYS = (
     "OrigDataStartFrame",
     "OrigNumFrames",
 )
+_KERNEL_PARSE_CHARS = 2_000_000  # larger data blocks: the numba parser (its load ~0.05 s)
+_EMPTY_CELL = re.compile(r"\t[ ]*(?=\t|$)", re.MULTILINE)
 
 
-def _cell_float(text: str) -> float:
-    text = text.strip()
-    if not text or text.lower() in ("nan", "-nan"):
-        return float("nan")
-    return float(text)
+def _cells(line: str) -> list[str]:
+    """Tab-separated cells, stripped, empty ones dropped (header lines)."""
+    return [c.strip() for c in line.split("\t") if c.strip()]
+
+
+def _header(p: Path, lines: list[str]) -> dict[str, str]:
+    keys = _cells(lines[1])
+    values = _cells(lines[2])
+    if len(values) != len(keys):
+        # some writers separate the values by spaces only
+        spaced = lines[2].split()
+        if len(spaced) == len(keys):
+            values = spaced
+    if len(values) < len(keys):
+        raise FileFormatError(
+            f"{p}: line 3 holds {len(values)} values for the {len(keys)} header fields of "
+            f"line 2 ({', '.join(keys)}); every field needs a value"
+        )
+    return dict(zip(keys, values, strict=False))
+
+
+def _number(p: Path, header: dict[str, str], key: str, kind: type) -> Any:
+    try:
+        return kind(float(header[key])) if kind is int else kind(header[key])
+    except ValueError:
+        raise FileFormatError(
+            f"{p}: header field {key!r} on line 3 is {header[key]!r}, not a number"
+        ) from None
+
+
+def _parse_data(p: Path, lines: list[str], first_line: int, width: int) -> np.ndarray:
+    """(N, width) floats of the data rows (NaN for empty cells); rows with missing trailing
+    cells are padded (and reported), extra cells must be empty."""
+    short: list[int] = []
+    fixed: list[str] = []
+    for offset, line in enumerate(lines):
+        n = line.count("\t") + 1
+        if n == width:
+            fixed.append(line)
+            continue
+        cells = line.split("\t")
+        if n > width:
+            extra = [c for c in cells[width:] if c.strip()]
+            if extra:
+                raise FileFormatError(
+                    f"{p}: line {first_line + offset} has {n} cells, more than the "
+                    f"{width} (Frame#, Time, X/Y/Z of each marker) the header announces"
+                )
+            fixed.append("\t".join(cells[:width]))
+        else:
+            short.append(first_line + offset)
+            fixed.append("\t".join(cells + [""] * (width - n)))
+    if short:
+        log.warning(
+            "%s: %d data rows have fewer than %d cells (first: line %d); their missing "
+            "trailing markers are read as gaps",
+            p,
+            len(short),
+            width,
+            short[0],
+        )
+    block = _EMPTY_CELL.sub("\tnan", "\n".join(fixed))
+    flat = np.empty(0)
+    if len(block) > _KERNEL_PARSE_CHARS:
+        from mocapkit.io._parse_kernels import parse_floats
+
+        raw = np.frombuffer(block.encode("ascii", errors="replace"), dtype=np.uint8)
+        out = np.empty(len(fixed) * width)
+        count = parse_floats(raw, out)
+        if count == out.size:
+            flat = out
+    if flat.size == 0:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DeprecationWarning)
+            try:
+                flat = np.fromstring(block.replace("\t", " "), dtype=np.float64, sep=" ")
+            except ValueError:
+                flat = np.empty(0)
+    if flat.size == len(fixed) * width:
+        return flat.reshape(len(fixed), width)
+    # a cell that is not a number: find it for the message
+    for offset, line in enumerate(fixed):
+        for c, cell in enumerate(line.split("\t")):
+            text = cell.strip()
+            if not text:
+                continue
+            try:
+                float(text)
+            except ValueError:
+                column = "Frame#" if c == 0 else "Time" if c == 1 else f"column {c + 1}"
+                raise FileFormatError(
+                    f"{p}: line {first_line + offset}, {column}: {text!r} is not a number"
+                ) from None
+    raise FileFormatError(f"{p}: the data rows could not be read as numbers")
 
 
 def read_trc(path: str | Path, units: str | None = None) -> MarkerTrajectories:
@@ -45,48 +153,62 @@ def read_trc(path: str | Path, units: str | None = None) -> MarkerTrajectories:
 
     Returns:
         Trajectories in metres, file axes; ``meta`` holds ``source``, ``units`` (declared),
-        ``rate_hz`` and ``up_axis="y"`` (the TRC convention; checked later).
+        ``rate_hz`` (``DataRate``) and ``up_axis="y"`` (the TRC convention; checked later).
     """
     p = Path(path)
+    raw = p.read_bytes()
+    if b"\x00" in raw[:4096]:
+        raise FileFormatError(f"{p}: not a text TRC file (binary content)")
     try:
-        lines = p.read_text(errors="strict").splitlines()
-    except UnicodeDecodeError as exc:
-        raise FileFormatError(f"{p}: not a text TRC file ({exc})") from exc
-    if len(lines) < 5 or not lines[0].startswith("PathFileType"):
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        text = raw.decode("latin-1")  # a Windows path in the first line, say
+    lines = text.splitlines()
+    if len(lines) < 5 or not lines[0].split() or lines[0].split()[0] != "PathFileType":
         raise FileFormatError(
             f"{p}: not a TRC file (the first line should start with 'PathFileType')"
         )
-    keys = [k.strip() for k in lines[1].split("\t")]
-    values = [v.strip() for v in lines[2].split("\t")]
-    header = dict(zip(keys, values, strict=False))
+    header = _header(p, lines)
     for key in ("DataRate", "NumMarkers", "Units"):
         if key not in header or not header[key]:
-            raise FileFormatError(f"{p}: header field {key!r} missing on line 3")
-    try:
-        rate = float(header["DataRate"])
-        n_markers = int(header["NumMarkers"])
-    except ValueError as exc:
-        raise FileFormatError(f"{p}: header line 3: {exc}") from exc
+            raise FileFormatError(
+                f"{p}: header field {key!r} missing on lines 2-3 (found: "
+                f"{', '.join(header) or 'none'}); a TRC header names DataRate, CameraRate, "
+                "NumFrames, NumMarkers, Units, OrigDataRate, OrigDataStartFrame, OrigNumFrames"
+            )
+    rate = _number(p, header, "DataRate", float)
+    n_markers = _number(p, header, "NumMarkers", int)
+    if not (np.isfinite(rate) and rate > 0):
+        raise FileFormatError(f"{p}: DataRate is {header['DataRate']}; expected a rate > 0 Hz")
     scale = length_scale(units or header["Units"], f"{p}: Units")
-    label_cells = lines[3].split("\t")
-    if len(label_cells) < 2 or label_cells[0].strip() != "Frame#":
-        raise FileFormatError(f"{p}: line 4 should start with 'Frame#\\tTime'")
-    names = [c.strip() for c in label_cells[2:] if c.strip()]
+    labels = _cells(lines[3])
+    if len(labels) < 2 or labels[0] != "Frame#" or labels[1] != "Time":
+        raise FileFormatError(f"{p}: line 4 should start with 'Frame#\\tTime', then the markers")
+    names = labels[2:]
     if len(names) != n_markers:
         raise FileFormatError(
             f"{p}: header says NumMarkers={n_markers} but line 4 names {len(names)} markers"
         )
-    rows = [line.split("\t") for line in lines[5:] if line.strip()]
-    time = np.empty(len(rows))
-    pos = np.full((len(rows), n_markers, 3), np.nan)
-    for i, cells in enumerate(rows):
-        try:
-            time[i] = float(cells[1])
-            coords = [_cell_float(c) for c in cells[2 : 2 + 3 * n_markers]]
-        except (ValueError, IndexError) as exc:
-            raise FileFormatError(f"{p}: data row {i} (file line {i + 6}): {exc}") from exc
-        coords += [float("nan")] * (3 * n_markers - len(coords))
-        pos[i] = np.asarray(coords).reshape(n_markers, 3)
+    seen: set[str] = set()
+    for n in names:
+        if n in seen:
+            raise FileFormatError(
+                f"{p}: marker {n!r} is named twice on line 4; labels must be unique"
+            )
+        seen.add(n)
+    start = 5
+    while start < len(lines) and not lines[start].strip():
+        start += 1
+    data_lines = [ln for ln in lines[start:] if ln.strip()]
+    if not data_lines:
+        raise FileFormatError(f"{p}: no data rows after the header")
+    table = _parse_data(p, data_lines, start + 1, 2 + 3 * n_markers)
+    time = table[:, 1].copy()
+    if not np.isfinite(time).all():
+        bad = int(np.flatnonzero(~np.isfinite(time))[0])
+        raise FileFormatError(f"{p}: data row {bad + 1} has no time; every row needs one")
+    pos = table[:, 2:].reshape(len(time), n_markers, 3) * scale
+    declared = header.get("NumFrames", "")
     meta: dict[str, Any] = {
         "source": str(p),
         "format": "trc",
@@ -95,26 +217,74 @@ def read_trc(path: str | Path, units: str | None = None) -> MarkerTrajectories:
         "up_axis": "y",
         "up_axis_source": "TRC convention (OpenSim)",
     }
-    return MarkerTrajectories(time, pos * scale, tuple(names), meta=meta)
+    try:
+        n_declared = int(float(declared)) if declared else None
+    except ValueError:
+        n_declared = None
+    if n_declared is not None and n_declared > len(time):
+        meta["truncated"] = {"frames": len(time), "declared": n_declared}
+        log.warning(
+            "%s: the header announces %d frames (NumFrames) but the file holds %d: it may be "
+            "cut short; only those %d frames are used",
+            p,
+            n_declared,
+            len(time),
+            len(time),
+        )
+    if len(time) > 2:
+        regular = time[0] + np.arange(len(time)) / rate
+        if np.abs(time - regular).max() > 0.25 / rate:  # not the same clock, not rounding
+            step = float(np.median(np.diff(time)))
+            if step > 0:
+                meta["rate_hz"] = 1.0 / step
+                meta["declared_rate_hz"] = rate
+            log.warning(
+                "%s: DataRate says %g Hz but the time column advances %.6g s per frame "
+                "(%.6g Hz); the time column is used. Fix the header's DataRate if the file "
+                "was resampled",
+                p,
+                rate,
+                step,
+                1.0 / step if step > 0 else float("nan"),
+            )
+    return MarkerTrajectories(time, pos, tuple(names), meta=meta)
 
 
-def write_trc(path: str | Path, trajectories: MarkerTrajectories, units: str = "mm") -> Path:
-    """Write trajectories (metres) as a TRC file in ``units`` (NaN -> empty cells)."""
+def write_trc(
+    path: str | Path,
+    trajectories: MarkerTrajectories,
+    units: str = "mm",
+    rate_hz: float | None = None,
+) -> Path:
+    """Write trajectories (metres, axes as given) as a TRC file in ``units``.
+
+    ``rate_hz``: the frame rate (default: the trajectories' declared rate); the time column
+    is written as ``time[0] + k / rate`` when the times are that regular to 1e-6 s, else as
+    given. Gaps are ``NaN`` cells (OpenSim 4 reads them as missing markers).
+    """
     p = Path(path)
     scale = 1.0 / length_scale(units, "units")
     traj = trajectories
-    rate = traj.rate_hz if traj.n_frames > 1 else float(traj.meta.get("rate_hz", 0.0))
+    rate = (
+        float(rate_hz)
+        if rate_hz is not None
+        else (traj.rate_hz if traj.n_frames > 1 else float(traj.meta.get("rate_hz", 0.0)))
+    )
+    if not (np.isfinite(rate) and rate > 0):
+        raise FileFormatError(f"{p}: the frame rate is {rate}; a TRC file needs a rate > 0 Hz")
+    regular = traj.time[0] + np.arange(traj.n_frames) / rate
+    time = regular if np.allclose(traj.time, regular, rtol=0.0, atol=1e-6) else traj.time
     out = [
         f"PathFileType\t4\t(X/Y/Z)\t{p.name}",
         "\t".join(_HEADER_KEYS),
         "\t".join(
             [
-                f"{rate:.6g}",
-                f"{rate:.6g}",
+                f"{rate:.10g}",
+                f"{rate:.10g}",
                 str(traj.n_frames),
                 str(traj.n_markers),
                 units,
-                f"{rate:.6g}",
+                f"{rate:.10g}",
                 "1",
                 str(traj.n_frames),
             ]
@@ -123,11 +293,10 @@ def write_trc(path: str | Path, trajectories: MarkerTrajectories, units: str = "
         "\t".join(["", "", *[f"X{i + 1}\tY{i + 1}\tZ{i + 1}" for i in range(traj.n_markers)]]),
         "",
     ]
-    data = traj.positions * scale
+    data = traj.positions.reshape(traj.n_frames, -1) * scale
     for f in range(traj.n_frames):
-        cells = [str(f + 1), f"{traj.time[f]:.6f}"]
-        for v in data[f].reshape(-1):
-            cells.append("" if not np.isfinite(v) else f"{v:.6f}")
+        cells = [str(f + 1), f"{time[f]:.9f}"]
+        cells += ["NaN" if not np.isfinite(v) else f"{v:.6f}" for v in data[f]]
         out.append("\t".join(cells))
     p.write_text("\n".join(out) + "\n")
     return p

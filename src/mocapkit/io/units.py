@@ -24,6 +24,6 @@ def length_scale(unit: str, where: str) -> float:
         return _TO_METRES[key]
     except KeyError:
         raise FileFormatError(
-            f"{where}: unknown length unit {unit!r}; expected one of mm, cm, m "
-            "(pass units=... to override)"
+            f"{where}: unknown length unit {unit!r}; expected one of mm, cm, m. Fix: pass "
+            "the file's unit (--units mm|cm|m on the command line, units=... in Python)"
         ) from None

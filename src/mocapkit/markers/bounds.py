@@ -33,7 +33,7 @@ marker errors to first order.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,6 +43,7 @@ from mocapkit.body.human_model import HumanModel
 from mocapkit.markers import rigid_fast
 from mocapkit.markers.bound_fit import total_bound
 from mocapkit.markers.coordinates import CoordinateMap, coordinates_from_q
+from mocapkit.markers.coordinates import coordinate_jacobian as _analytic_jacobian
 from mocapkit.markers.kinematics import MarkerKinematics
 
 # A DOF moving more than this per millimetre of marker error is poorly determined.
@@ -126,7 +127,19 @@ def _perturbed(Q: FloatArray, nv: int, eps: float) -> FloatArray:
     return out
 
 
-def coordinate_jacobian(human: HumanModel, cmap: CoordinateMap, Q: FloatArray) -> FloatArray:
+def coordinate_jacobian(
+    human: HumanModel, cmap: CoordinateMap, Q: FloatArray, coords: FloatArray | None = None
+) -> FloatArray:
+    """(N, K, nv) derivative of the reported coordinates (:mod:`mocapkit.markers.coordinates`)
+    with respect to the model's velocity coordinates, analytically
+    (:func:`mocapkit.markers.coordinates.coordinate_jacobian`; equal to the central
+    differences of :func:`coordinate_jacobian_reference` to 1e-8)."""
+    return _analytic_jacobian(human, Q, cmap, coords)
+
+
+def coordinate_jacobian_reference(
+    human: HumanModel, cmap: CoordinateMap, Q: FloatArray
+) -> FloatArray:
     """(N, K, nv) derivative of the reported coordinates (:mod:`mocapkit.markers.coordinates`)
     with respect to the model's velocity coordinates, by central differences (step 1e-6:
     the coordinates are smooth away from gimbal lock, where the derivative is rightly huge).
@@ -168,6 +181,8 @@ class BoundReport:
             the markers' noise can move that fit (:mod:`mocapkit.markers.bound_fit`), capped
             like ``dc``; NaN where undetermined or without redundancy to estimate the noise;
             None when not requested (``with_total=False``).
+        per_frame: the sensitivities are every frame's (else each visibility pattern's
+            sampled frames', :func:`_sampled_sensitivities`).
     """
 
     dq: FloatArray
@@ -177,6 +192,7 @@ class BoundReport:
     poorly_determined: dict[str, int]
     unobserved: np.ndarray
     total: FloatArray | None
+    per_frame: bool = True
 
     @property
     def worst_sensitivity_deg_per_mm(self) -> FloatArray:
@@ -238,6 +254,64 @@ def sensitivities(
     return out
 
 
+def _pattern_samples(keys: np.ndarray, per_group: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Frames sharing a row of ``keys`` (N, k) bool form a group (their visible markers,
+    free DOFs and reported columns are the same); returns (N,) group ids and the sampled
+    frames (first, middle and last of each group's frames, ``per_group`` at most)."""
+    packed = np.packbits(keys, axis=1)
+    _, group = np.unique(packed, axis=0, return_inverse=True)
+    group = np.asarray(group).reshape(-1)
+    samples: list[int] = []
+    for g in range(int(group.max()) + 1 if group.size else 0):
+        idx = np.flatnonzero(group == g)
+        pick = np.unique(
+            idx[np.linspace(0, idx.size - 1, min(per_group, idx.size)).round().astype(int)]
+        )
+        samples.extend(int(i) for i in pick)
+    return group, np.array(sorted(samples), dtype=np.int64)
+
+
+def _sampled_sensitivities(
+    human: HumanModel,
+    names: Sequence[str],
+    Q: FloatArray,
+    X: FloatArray,
+    weights: FloatArray,
+    free: np.ndarray,
+    rows: np.ndarray,
+    cmap: CoordinateMap,
+    coords: FloatArray,
+) -> FloatArray:
+    """Sensitivities (N, K) [rad/m] evaluated at up to three frames of each visibility
+    pattern (same visible markers, free DOFs and reported columns) and given to all its
+    frames: the largest finite value seen, inf when every sample is blind. The rank of the
+    markers' Jacobian is a property of the pattern away from singular poses, so the
+    "unobserved" test is the same as frame by frame; the deg/mm figures are the pattern's
+    worst sampled value (``per_frame=True`` computes every frame)."""
+    vis = np.isfinite(X[:, :, 0]) & (weights > 0)[None, :]
+    group, samples = _pattern_samples(np.concatenate([vis, free, rows], axis=1))
+    if samples.size == 0:
+        return np.full(rows.shape, np.nan)
+    Gs = coordinate_jacobian(human, cmap, Q[samples], coords[samples])
+    sens_s = sensitivities(
+        human, names, Q[samples], X[samples], weights, free[samples], Gs, rows[samples]
+    )
+    out = np.full(rows.shape, np.nan)
+    for g in np.unique(group[samples]):
+        members = group == g
+        vals = sens_s[group[samples] == g]  # (s, K)
+        fin = np.where(np.isfinite(vals), vals, -np.inf).max(axis=0)
+        allinf = np.isinf(vals).all(axis=0) & ~np.isnan(vals).any(axis=0)
+        val = np.where(np.isfinite(fin), fin, np.nan)
+        val[allinf] = np.inf
+        out[members] = val[None, :]
+    out[~rows] = np.nan
+    return out
+
+
+_BLOCK = 1024  # frames per block of the coordinate Jacobian (N x K x nv floats)
+
+
 def bound_report(
     human: HumanModel,
     cmap: CoordinateMap,
@@ -251,12 +325,21 @@ def bound_report(
     held: Sequence[str] = (),
     columns: np.ndarray | None = None,
     with_total: bool = True,
+    coords: FloatArray | None = None,
+    per_frame: bool | None = None,
+    progress: Callable[[str, float, float], None] | None = None,
 ) -> BoundReport:
     """Apply rules 1-3 of the module docstring to a method's raw Δq (N, nv): ``root``,
     ``dofs`` from :func:`mocapkit.markers.determined.dof_determined`, ``held`` the
     coordinate tasks' DOFs, ``columns`` (N, K) the determined reported coordinates;
     ``with_total``: also the bound that holds (:mod:`mocapkit.markers.bound_fit`: a fit per
-    frame, the costlier part; the CLI computes it on request, ``--total-bound``)."""
+    frame, the costlier part; the CLI computes it on request, ``--total-bound``);
+    ``coords`` (N, K): the coordinates of Q if already computed; ``per_frame``: the
+    conditioning (sensitivities) of every frame rather than of each visibility pattern's
+    sampled frames (:func:`_sampled_sensitivities`); default: with the total bound."""
+    per_frame = with_total if per_frame is None else per_frame
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
+    coords = coordinates_from_q(human, Q, cmap) if coords is None else coords
     out = np.array(dq, dtype=float, copy=True)
     out[~root, :6] = np.nan
     out[:, 6:][~dofs] = np.nan
@@ -264,10 +347,18 @@ def bound_report(
     span = np.concatenate([np.full(6, np.inf), hi - lo])
     with np.errstate(invalid="ignore"):
         capped_q = np.abs(out) > span
-    out = np.where(capped_q, np.sign(out) * span, out)
-    G = coordinate_jacobian(human, cmap, Q)
+    out = np.where(capped_q, np.copysign(span, out), out)
     cols = np.ones((len(Q), len(cmap.names)), dtype=bool) if columns is None else columns
-    dc = np.einsum("nkv,nv->nk", G, np.nan_to_num(out))
+    dc = np.empty((len(Q), len(cmap.names)))
+    dep = np.empty((len(Q), len(cmap.names)), dtype=bool)
+    for a in range(0, len(Q), _BLOCK):
+        b = min(len(Q), a + _BLOCK)
+        G = coordinate_jacobian(human, cmap, Q[a:b], coords[a:b])
+        dc[a:b] = np.einsum("nkv,nv->nk", G, np.nan_to_num(out[a:b]))
+        # a coordinate is capped if a model DOF it depends on was
+        dep[a:b] = ((np.abs(G) > 1e-9) & capped_q[a:b, None, :]).any(axis=2)
+        if progress is not None:
+            progress("joint-error bounds", b, len(Q))
     dc[~cols] = np.nan
     cspan = np.full(len(cmap.names), np.inf)
     for k, (kind, a, _) in enumerate(cmap.source):
@@ -277,10 +368,8 @@ def bound_report(
             cspan[k] = np.pi
     with np.errstate(invalid="ignore"):
         over = np.abs(dc) > cspan
-    dc = np.where(over, np.sign(dc) * cspan, dc)
-    # a coordinate is capped if it was, or if a model DOF it depends on was
-    capped = over | ((np.abs(G) > 1e-9) & capped_q[:, None, :]).any(axis=2)
-    capped &= cols
+    dc = np.where(over, np.copysign(cspan, dc), dc)
+    capped = (over | dep) & cols
     held_idx = [6 + human.dof_names.index(d) for d in held if d in human.dof_names]
     free = np.concatenate([np.repeat(root[:, None], 6, axis=1), dofs], axis=1)
     free[:, held_idx] = False
@@ -288,7 +377,12 @@ def bound_report(
     for k, (kind, a, _) in enumerate(cmap.source):
         if kind == "dof" and (6 + a) in held_idx:
             rows[:, k] = False  # held by a coordinate task: no marker fit behind it
-    sens = sensitivities(human, names, Q, X, weights, free, G, rows)
+    if per_frame:
+        sens = sensitivities(
+            human, names, Q, X, weights, free, coordinate_jacobian(human, cmap, Q, coords), rows
+        )
+    else:
+        sens = _sampled_sensitivities(human, names, Q, X, weights, free, rows, cmap, coords)
     sens = np.degrees(sens) / 1000.0
     unobserved = np.isinf(sens)
     dc[unobserved] = np.nan
@@ -298,6 +392,10 @@ def bound_report(
     counts = {c: int(poor[:, k].sum()) for k, c in enumerate(cmap.names) if poor[:, k].any()}
     total = None
     if with_total:
+        if progress is not None:
+            progress("total bound (a fit per frame)", 0, 1)
         total = total_bound(human, cmap, names, Q, X, weights, free, rows & ~unobserved)
+        if progress is not None:
+            progress("total bound (a fit per frame)", 1, 1)
         total = np.minimum(total, cspan[None, :])
-    return BoundReport(out, dc, capped, sens, counts, unobserved, total)
+    return BoundReport(out, dc, capped, sens, counts, unobserved, total, per_frame)

@@ -380,3 +380,97 @@ def to_rajagopal(
     for i, c in enumerate(labels):
         vals[:, i] *= MODEL_SIGNS[used].get(c, 1.0)
     return vals, used
+
+
+# -- derivatives -------------------------------------------------------------------------------
+_NEAR_ZERO_COS = 1e-12  # |cos(middle angle)| floor: exact gimbal lock gives a huge, finite rate
+
+
+def _axis_angle_matrices(axis: FloatArray, angle: FloatArray) -> FloatArray:
+    """(N, 3, 3) rotations about the unit ``axis`` (3,) by ``angle`` (N,) [rad]."""
+    c, s = np.cos(angle), np.sin(angle)
+    x, y, z = axis
+    C = 1.0 - c
+    return np.stack(
+        [
+            np.stack([c + x * x * C, x * y * C - z * s, x * z * C + y * s], axis=-1),
+            np.stack([y * x * C + z * s, c + y * y * C, y * z * C - x * s], axis=-1),
+            np.stack([z * x * C - y * s, z * y * C + x * s, c + z * z * C], axis=-1),
+        ],
+        axis=-2,
+    )
+
+
+def _safe_cos(b: FloatArray) -> FloatArray:
+    cb = np.cos(b)
+    return np.where(np.abs(cb) < _NEAR_ZERO_COS, np.where(cb < 0, -1.0, 1.0) * _NEAR_ZERO_COS, cb)
+
+
+def _xyz_rates(a: FloatArray, b: FloatArray, w: FloatArray) -> FloatArray:
+    """Rates (N, 3, k) of intrinsic X-Y-Z angles (first ``a``, middle ``b``: (N,)) for the
+    spatial angular velocities ``w`` (N, 3, k): ω = ȧ e_x + ḃ R_x e_y + ċ R_x R_y e_z."""
+    ca, sa = np.cos(a)[:, None], np.sin(a)[:, None]
+    cb, sb = _safe_cos(b)[:, None], np.sin(b)[:, None]
+    wx, wy, wz = w[:, 0], w[:, 1], w[:, 2]
+    c_dot = (wz * ca - wy * sa) / cb
+    return np.stack([wx - c_dot * sb, wy * ca + wz * sa, c_dot], axis=1)
+
+
+def _zxy_rates(a: FloatArray, b: FloatArray, w: FloatArray) -> FloatArray:
+    """Rates (N, 3, k) of intrinsic Z-X-Y angles: ω = ȧ e_z + ḃ R_z e_x + ċ R_z R_x e_y."""
+    ca, sa = np.cos(a)[:, None], np.sin(a)[:, None]
+    cb, sb = _safe_cos(b)[:, None], np.sin(b)[:, None]
+    wx, wy, wz = w[:, 0], w[:, 1], w[:, 2]
+    c_dot = (wy * ca - wx * sa) / cb
+    return np.stack([wz - c_dot * sb, wx * ca + wy * sa, c_dot], axis=1)
+
+
+def coordinate_jacobian(
+    human: HumanModel,
+    Q: FloatArray,
+    cmap: CoordinateMap | None = None,
+    coords: FloatArray | None = None,
+) -> FloatArray:
+    """(N, K, nv) derivative of the reported coordinates with respect to the model's
+    velocity coordinates (the free-flyer's local twist, then the joints), analytically:
+
+    - ``pelvis_t*`` = C p: ∂/∂v_lin = C R (C: z-up world to OpenSim ground, R: pelvis);
+    - pelvis angles, intrinsic Z-X-Y of C R Cᵀ: their rates for the spatial angular
+      velocity C R ω_local;
+    - a model DOF's own column: 1;
+    - a derived joint: spatial angular velocity of the child in the parent,
+      Σ_k (R_1 ⋯ R_{k-1}) a_k θ̇_k, in the chain's frame F, through the intrinsic X-Y-Z
+      rates (the third scaled by its sign). The second Euler solution (a + π, π − b, c + π)
+      gives the same rates with the middle one negated, which the formula yields by itself
+      from the reported angles.
+
+    ``coords`` (N, K): the coordinates of Q when already computed. At exact gimbal lock the
+    rates are huge (|cos b| floored at 1e-12), as the finite differences would be.
+    """
+    cm = cmap or coordinate_map(human)
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
+    C = coords if coords is not None else coordinates_from_q(human, Q, cm)
+    n, nv, K = Q.shape[0], human.nv, len(cm.names)
+    G = np.zeros((n, K, nv))
+    R = quat_to_matrix(quat_from_xyzw(Q[:, 3:7]))  # (N, 3, 3) world <- pelvis
+    CR = Z_UP_TO_OPENSIM @ R  # (N, 3, 3): v_lin and ω_local -> OpenSim ground
+    G[:, 0:3, 0:3] = CR
+    G[:, 3:6, 3:6] = _zxy_rates(C[:, 3], C[:, 4], CR)
+    for col, (kind, a, _b) in enumerate(cm.source):
+        if kind == "dof":
+            G[:, col, 6 + a] = 1.0
+    for c, ch in enumerate(cm.chains):
+        cols = [col for col, (kind, a, _) in enumerate(cm.source) if kind == "derived" and a == c]
+        order = [cm.source[col][2] for col in cols]
+        if len(cols) != 3 or order != [0, 1, 2]:
+            raise ConfigError(f"derived joint {ch.joint.names}: columns out of order")
+        F = quat_to_matrix(ch.q_frame)
+        cum = np.tile(np.eye(3), (n, 1, 1))
+        w = np.empty((n, 3, len(ch.dofs)))
+        for k, dof in enumerate(ch.dofs):
+            w[:, :, k] = cum @ ch.axes[k]
+            cum = cum @ _axis_angle_matrices(ch.axes[k], Q[:, 7 + dof])
+        rates = _xyz_rates(C[:, cols[0]], C[:, cols[1]], np.einsum("ji,njk->nik", F, w))
+        rates[:, 2] *= ch.third_sign
+        G[:, cols[0] : cols[0] + 3, [6 + d for d in ch.dofs]] = rates
+    return G

@@ -4,7 +4,12 @@ The paper groups markers into *independent* subsets: markers on one rigid segmen
 coupled, so they should not share a level. Strategies:
 
 - ``paper``: the seed's own grouping — (right shoulder, left wrist), then (left elbow,
-  right wrist) — taken from the marker set's ``groups.paper`` or its ``roles``;
+  right wrist), taken from the marker set's ``groups.paper`` or its ``roles`` — as the two
+  top levels, then every other marker in one level below them: the paper's hierarchy on a
+  whole body (its four arm markers alone determine no joint of a body whose pelvis and
+  trunk are free: every angle came out NaN);
+- ``paper-only``: the paper's two subsets and nothing else (its tai chi experiment, on
+  the arms alone); the trunk and legs are then undetermined and left out;
 - ``weights`` (reliability): one level per distinct marker weight, heaviest first — the
   marker set's weights say how much a marker can be trusted (OpenSim's gait2392: bony
   landmarks 10, clusters 1, acromion 0.5, head 0.1), so trusted markers are tracked
@@ -32,7 +37,7 @@ from mocapkit.body.markersets import MarkerSet
 from mocapkit.errors import ConfigError, FileFormatError
 
 Levels = tuple[tuple[str, ...], ...]
-STRATEGIES = ("single", "independent", "auto", "tree", "weights", "paper")
+STRATEGIES = ("single", "independent", "auto", "tree", "weights", "paper", "paper-only")
 
 
 def weight_levels(names: Sequence[str], weights: Mapping[str, float]) -> Levels:
@@ -92,8 +97,12 @@ def make_levels(
         return independent_levels(names, segment_of, weights)
     if strategy == "single":
         return (tuple(n for n in names if weights.get(n, 1.0) > 0),)
-    if strategy == "paper":
+    if strategy in ("paper", "paper-only"):
         levels = markerset.paper_grouping()
+        if strategy == "paper":
+            top = {m for level in levels for m in level}
+            rest = tuple(n for n in names if n not in top and weights.get(n, 1.0) > 0)
+            levels = (*levels, rest) if rest else levels
     else:
         p = Path(strategy)
         if not p.is_file():

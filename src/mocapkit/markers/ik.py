@@ -10,7 +10,7 @@ the fast path is tested against.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -22,6 +22,8 @@ from mocapkit.errors import ConfigError, DataError
 from mocapkit.markers import rigid_fast
 from mocapkit.markers.ik_kernels import LAMBDA0, ik_trial
 from mocapkit.markers.kinematics import MarkerKinematics
+
+BLOCK_FRAMES = 2000  # frames per kernel call (progress is reported between calls)
 
 Backend = Literal["fast", "reference"]
 
@@ -120,8 +122,10 @@ def solve_ik(
     coordinate_tasks: Mapping[str, tuple[float, float]] | None = None,
     q_posture: FloatArray | None = None,
     params: IKParams | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> IKSolution:
-    """Weighted least-squares IK over frames.
+    """Weighted least-squares IK over frames (in blocks of :data:`BLOCK_FRAMES`;
+    ``progress(done, total)`` after each).
 
     Args:
         human: model with the markers ``names`` attached.
@@ -146,10 +150,21 @@ def solve_ik(
     kin = MarkerKinematics(human, names)
     if p.backend == "fast":
         fm = rigid_fast.flatten(human.model, kin.frame_ids)
-        Q, C, It = ik_trial(
-            fm.parent, fm.R0, fm.p0, fm.axis, fm.marker_joint, fm.marker_offset,
-            q0, X, w, pv, pw, lo, hi, p.max_iter_first, p.max_iter, p.tol,
-        )  # fmt: skip
+        parts = []
+        q = q0
+        N = X.shape[0]
+        for a in range(0, N, BLOCK_FRAMES):  # blocks: the same numbers as one call
+            b = min(N, a + BLOCK_FRAMES)
+            first_iter = p.max_iter_first if a == 0 else p.max_iter
+            Qb, Cb, Itb = ik_trial(
+                fm.parent, fm.R0, fm.p0, fm.axis, fm.marker_joint, fm.marker_offset,
+                q, X[a:b], w, pv, pw, lo, hi, first_iter, p.max_iter, p.tol,
+            )  # fmt: skip
+            parts.append((Qb, Cb, Itb))
+            q = Qb[-1]
+            if progress is not None:
+                progress(b, N)
+        Q, C, It = (np.concatenate([part[k] for part in parts]) for k in range(3))
         return IKSolution(Q, C, It)
     Qs, Cs, Its = [], [], []
     q = q0

@@ -16,7 +16,7 @@ arrived, so online and offline are the same computation.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -33,6 +33,7 @@ from mocapkit.markers.osc_kernels import osc_frame, osc_trial
 from mocapkit.markers.prioritized import DEFAULT_DAMPING
 
 Backend = Literal["fast", "reference"]
+BLOCK_FRAMES = 2000  # frames per kernel call (progress is reported between calls)
 
 
 @dataclass(frozen=True)
@@ -273,9 +274,12 @@ def reconstruct_offline(
     q_posture: FloatArray | None = None,
     params: OSCParams | None = None,
     weights: Mapping[str, float] | None = None,
+    progress: Callable[[int, int], None] | None = None,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Whole trial X (N, M, 3): returns Q (N, nq), tracked markers (N, M, 3), ΔQ (N, nv)
-    and marker errors (N, M). Frame 0 starts at ``q_init`` at rest."""
+    and marker errors (N, M). Frame 0 starts at ``q_init`` at rest. The kernel runs in
+    blocks of :data:`BLOCK_FRAMES` (the same numbers as one call); ``progress(done,
+    total)`` is called after each."""
     p = params or OSCParams()
     X = np.ascontiguousarray(X, dtype=float)
     if X.ndim != 3 or X.shape[1:] != (len(names), 3):
@@ -297,12 +301,26 @@ def reconstruct_offline(
     )
     fm = pb.flat
     Xd, Xdd = target_derivatives(X, rate_hz)
-    Q, P, DQ, E = osc_trial(
-        fm.parent, fm.R0, fm.p0, fm.axis, fm.mass, fm.com, fm.inertia, fm.gravity,
-        fm.marker_joint, fm.marker_offset, q0, X, Xd, Xdd, pb.row_weight, pb.level_ptr,
-        pb.level_markers, pb.dof_ptr, pb.dof_markers, pb.lock_dof, pb.lock_value, pb.lower,
-        pb.upper, pb.q_posture, p.gains(rate_hz), 1.0 / rate_hz, p.substeps,
-    )  # fmt: skip
+    N = X.shape[0]
+    parts: list[tuple[FloatArray, FloatArray, FloatArray, FloatArray]] = []
+    q, v = q0, np.zeros(human.nv)
+    for a in range(0, N, BLOCK_FRAMES):
+        b = min(N, a + BLOCK_FRAMES)
+        lo_f = a - 1 if a > 0 else 0  # a block repeats the previous block's last frame
+        Qb, Pb, DQb, Eb, v = osc_trial(
+            fm.parent, fm.R0, fm.p0, fm.axis, fm.mass, fm.com, fm.inertia, fm.gravity,
+            fm.marker_joint, fm.marker_offset, q, v, X[lo_f:b], Xd[lo_f:b], Xdd[lo_f:b],
+            pb.row_weight, pb.level_ptr, pb.level_markers, pb.dof_ptr, pb.dof_markers,
+            pb.lock_dof, pb.lock_value, pb.lower, pb.upper, pb.q_posture, p.gains(rate_hz),
+            1.0 / rate_hz, p.substeps, a - lo_f,
+        )  # fmt: skip
+        parts.append((Qb, Pb, DQb, Eb))
+        q = Qb[-1]
+        if progress is not None:
+            progress(b, N)
+        if not np.isfinite(q).all():
+            break
+    Q, P, DQ, E = (np.concatenate([part[k] for part in parts]) for k in range(4))
     if not np.isfinite(Q).all():
         bad = int(np.flatnonzero(~np.isfinite(Q).all(axis=1))[0])
         raise DataError(

@@ -31,13 +31,19 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from mocapkit.markers.prioritized import prioritized_torque
+from mocapkit.markers.prioritized import (
+    prioritized_torque,
+    prioritized_torque_single,
+    tri_inverse_lower,
+)
 from mocapkit.markers.rigid_fast import (
+    body_velocities_bias,
     dynamics_terms,
     forward_kinematics,
     integrate,
     marker_bias,
     marker_kinematics,
+    marker_positions,
 )
 
 FloatArray = np.ndarray  # numba kernels: mypy does not track their dtypes
@@ -220,6 +226,123 @@ def reacquire(
     return n - 6
 
 
+LIMIT_ROUNDS = 4  # solves per step at most: the first, then one per batch of DOFs held
+
+
+@njit(cache=True)
+def _solve_levels(
+    Amat: FloatArray,
+    LA: FloatArray,
+    Ainv: FloatArray,
+    h: FloatArray,
+    lock_cols: np.ndarray,
+    lock_acc: FloatArray,
+    Jm: FloatArray,
+    accm: FloatArray,
+    biasm: FloatArray,
+    dxm: FloatArray,
+    mptr: np.ndarray,
+    n_levels: int,
+    n_marker_rows: int,
+    a_post: FloatArray,
+    want_bound: bool,
+    damping: float,
+) -> tuple[FloatArray, FloatArray]:
+    """q̈ and the bound Δq of one control step: held DOFs (rows of the identity, exact) >
+    the marker levels > posture (eq. 6-13); the default single marker level by the
+    cheaper joint-space route (the same numbers)."""
+    nv = Amat.shape[0]
+    n_lock = lock_cols.shape[0]
+    if n_levels == 1 and n_marker_rows > 0:
+        _G, qdd, dq = prioritized_torque_single(
+            Amat,
+            LA,
+            h,
+            lock_cols,
+            lock_acc,
+            Jm,
+            accm,
+            biasm,
+            a_post,
+            dxm,
+            want_bound,
+            damping,
+            Ainv,
+        )
+        return qdd, dq
+    n_rows = n_lock + n_marker_rows
+    Jall = np.zeros((n_rows, nv))
+    acc = np.zeros(n_rows)
+    bias = np.zeros(n_rows)
+    dx = np.zeros(n_rows)
+    ptr = np.zeros(n_levels + 2, dtype=np.int64)
+    for c in range(n_lock):
+        Jall[c, lock_cols[c]] = 1.0
+        acc[c] = lock_acc[c]
+    Jall[n_lock:] = Jm
+    acc[n_lock:] = accm
+    bias[n_lock:] = biasm
+    dx[n_lock:] = dxm
+    ptr[1] = n_lock
+    for lv in range(n_levels):
+        ptr[lv + 2] = n_lock + mptr[lv + 1]
+    # the bound (eq. 15) of the last step's marker errors; lock rows have no error
+    _G, qdd, dq = prioritized_torque(
+        Amat, LA, h, Jall, acc, bias, ptr, a_post, dx, want_bound, damping, True
+    )
+    return qdd, dq
+
+
+STEP_GROWTH = 1.5  # a step may raise the weighted marker error by this factor (+ slack)
+STEP_HALVINGS = 6  # then its velocity is halved, this many times at most
+
+
+@njit(cache=True)
+def _target_errors(
+    P: FloatArray,
+    x0: FloatArray,
+    x1: FloatArray,
+    xd0: FloatArray,
+    xdd0: FloatArray,
+    tracked: np.ndarray,
+    row_weight: FloatArray,
+    level_ptr: np.ndarray,
+    level_markers: np.ndarray,
+    s: float,
+) -> FloatArray:
+    """Per priority level, Σ w_m ‖x_m(s) − P_m‖² over its tracked markers, x_m(s) the
+    frame's target at time s after t_{f-1} (as the control law's; a marker not visible at
+    t_{f-1}: x1)."""
+    n_levels = level_ptr.shape[0] - 1
+    out = np.zeros(n_levels)
+    for lv in range(n_levels):
+        for k in range(level_ptr[lv], level_ptr[lv + 1]):
+            m = level_markers[k]
+            if not tracked[m]:
+                continue
+            for c in range(3):
+                if np.isfinite(x0[m, 0]):
+                    xt = x0[m, c] + xd0[m, c] * s + 0.5 * xdd0[m, c] * s * s
+                else:
+                    xt = x1[m, c]
+                d = xt - P[m, c]
+                out[lv] += row_weight[m] * d * d
+    return out
+
+
+@njit(cache=True)
+def _step_worse(err_try: FloatArray, err_hold: FloatArray, slack: FloatArray) -> bool:
+    """Lexicographic over the priority levels: the first level whose error moves by more
+    than its slack decides (worse: grown by more than STEP_GROWTH); a lower level may
+    lose what a higher one gains."""
+    for lv in range(err_try.shape[0]):
+        if err_try[lv] > STEP_GROWTH * err_hold[lv] + slack[lv]:
+            return True
+        if err_try[lv] < err_hold[lv] - slack[lv]:
+            return False
+    return False
+
+
 @njit(cache=True)
 def osc_frame(
     parent: np.ndarray,
@@ -303,15 +426,27 @@ def osc_frame(
     mptr = np.zeros(n_levels + 1, dtype=np.int64)
     for j in range(n_sub):
         s_now = j * dt
-        R, t, S, V, Ab, Amat, h = dynamics_terms(
-            parent, R0, p0, axis, mass, com, inertia, gravity, q, v
-        )
+        if j == 0:
+            # the rigid-body terms (A, b + g, and A's factors) once per capture frame: the
+            # substeps of a frame share them (the metric of the dynamically consistent
+            # inverse moves little in 1/(rate * substeps) s; ~17 % of a frame's cost)
+            R, t, S, V, Ab, Amat, h = dynamics_terms(
+                parent, R0, p0, axis, mass, com, inertia, gravity, q, v
+            )
+            if not (np.isfinite(Amat).all() and np.isfinite(h).all()):
+                nan = np.full(M, np.nan)
+                return q * np.nan, v * np.nan, np.full((M, 3), np.nan), np.full(nv, np.nan), nan
+            LA = np.linalg.cholesky(Amat)
+            LAi = tri_inverse_lower(LA)
+            Ainv = np.ascontiguousarray(LAi.T) @ LAi
+        else:
+            R, t, S = forward_kinematics(parent, R0, p0, axis, q)
+            V, Ab = body_velocities_bias(parent, S, v)
         P, J = marker_kinematics(parent, R, t, S, marker_joint, marker_offset)
         B = marker_bias(R, t, V, Ab, marker_joint, marker_offset)
-        if not (np.isfinite(Amat).all() and np.isfinite(h).all() and np.isfinite(J).all()):
+        if not np.isfinite(J).all():
             nan = np.full(M, np.nan)
             return q * np.nan, v * np.nan, np.full((M, 3), np.nan), np.full(nv, np.nan), nan
-        LA = np.linalg.cholesky(Amat)
         r = 0
         for lv in range(n_levels):
             for k in range(level_ptr[lv], level_ptr[lv + 1]):
@@ -341,41 +476,83 @@ def osc_frame(
         lock_rows, lock_target, _kind = _lock_rows(
             q, v, lock_dof, lock_value, lower, upper, determined, push
         )
-        n_lock = lock_rows.shape[0]
-        n_rows = n_lock + n_marker_rows
-        Jall = np.zeros((n_rows, nv))
-        acc = np.zeros(n_rows)
-        bias = np.zeros(n_rows)
-        dx = np.zeros(n_rows)
-        ptr = np.zeros(n_levels + 2, dtype=np.int64)
-        for c in range(n_lock):
-            iq = lock_rows[c]
-            Jall[c, iq - 1] = 1.0
-            acc[c] = kpl * (lock_target[c] - q[iq]) - kdl * v[iq - 1]
-        Jall[n_lock:] = Jm
-        acc[n_lock:] = accm
-        bias[n_lock:] = biasm
-        dx[n_lock:] = dxm
-        ptr[1] = n_lock
-        for lv in range(n_levels):
-            ptr[lv + 2] = n_lock + mptr[lv + 1]
         a_post = -kdp * v
         for iq in range(7, q.shape[0]):
             a_post[iq - 1] += kpp * (q_posture[iq] - q[iq])
-        # the bound (eq. 15) of the last step's marker errors; lock rows have no error
-        _Gamma, qdd, dq = prioritized_torque(
-            Amat, LA, h, Jall, acc, bias, ptr, a_post, dx, j == n_sub - 1, gains[6], True
+        n_lock = lock_rows.shape[0]
+        lock_cols = np.empty(nv, dtype=np.int64)
+        lock_acc = np.empty(nv)
+        for c in range(n_lock):
+            iq = lock_rows[c]
+            lock_cols[c] = iq - 1
+            lock_acc[c] = kpl * (lock_target[c] - q[iq]) - kdl * v[iq - 1]
+        want = j == n_sub - 1
+        qdd = np.zeros(nv)
+        dq_step = np.zeros(nv)
+        # Active set of the joint limits: a free DOF that this step's solution would carry
+        # through its limit is held landing exactly on it, and the step is solved again,
+        # so the other DOFs get accelerations that do not count on it (clamping it after
+        # the solve left them to overshoot, and the arm chattered between limits).
+        for _round in range(LIMIT_ROUNDS):
+            qdd, dq_step = _solve_levels(
+                Amat, LA, Ainv, h, lock_cols[:n_lock], lock_acc[:n_lock], Jm, accm, biasm, dxm,
+                mptr, n_levels, n_marker_rows, a_post, want, gains[6],
+            )  # fmt: skip
+            added = 0
+            for iq in range(7, q.shape[0]):
+                iv = iq - 1
+                held = False
+                for c in range(n_lock):
+                    if lock_cols[c] == iv:
+                        held = True
+                        break
+                if held:
+                    continue
+                q_next = q[iq] + (v[iv] + qdd[iv] * dt) * dt
+                if q_next < lower[iq] - 1e-12 or q_next > upper[iq] + 1e-12:
+                    limit = lower[iq] if q_next < lower[iq] else upper[iq]
+                    lock_cols[n_lock] = iv
+                    lock_acc[n_lock] = (limit - q[iq] - v[iv] * dt) / (dt * dt)
+                    n_lock += 1
+                    added += 1
+            if added == 0:
+                break
+        if want:
+            dq = dq_step
+        v_new = v + qdd * dt
+        _cap_speed(v_new, gains[7])
+        # A step that carries the model away from its targets is shortened (its velocity
+        # halved, up to STEP_HALVINGS times; levels compared in priority order): near a
+        # singular pose (a shoulder's two axes aligned) the damped inverse can turn the
+        # task accelerations into joint speeds at the cap, which threw CMU 85_12's arm
+        # onto a far branch of its angles.
+        s_next = s_now + dt
+        err_hold = _target_errors(
+            P, x0, x1, xd0, xdd0, tracked, row_weight, level_ptr, level_markers, s_next
         )
-        v = v + qdd * dt
-        _cap_speed(v, gains[7])
-        q = integrate(q, v * dt)
+        slack = np.empty(n_levels)  # (1 mm)² per tracked marker of the level
+        for lv in range(n_levels):
+            slack[lv] = 1e-6 * (mptr[lv + 1] - mptr[lv]) / 3.0
+        for _half in range(STEP_HALVINGS + 1):
+            q_try = integrate(q, v_new * dt)
+            for iq in range(7, q.shape[0]):
+                q_try[iq] = min(max(q_try[iq], lower[iq]), upper[iq])
+            if _half == STEP_HALVINGS:
+                break
+            Rt, tt, _St = forward_kinematics(parent, R0, p0, axis, q_try)
+            P_try = marker_positions(Rt, tt, marker_joint, marker_offset)
+            err_try = _target_errors(
+                P_try, x0, x1, xd0, xdd0, tracked, row_weight, level_ptr, level_markers, s_next
+            )
+            if not _step_worse(err_try, err_hold, slack):
+                break
+            v_new = 0.5 * v_new
         for iq in range(7, q.shape[0]):
-            if q[iq] < lower[iq]:
-                q[iq] = lower[iq]
-                v[iq - 1] = max(v[iq - 1], 0.0)
-            elif q[iq] > upper[iq]:
-                q[iq] = upper[iq]
-                v[iq - 1] = min(v[iq - 1], 0.0)
+            if q_try[iq] <= lower[iq]:
+                v_new[iq - 1] = max(v_new[iq - 1], 0.0)
+            elif q_try[iq] >= upper[iq]:
+                v_new[iq - 1] = min(v_new[iq - 1], 0.0)
+        q, v = q_try, v_new
         if not (np.isfinite(q).all() and np.isfinite(v).all() and np.abs(v).max() < 1e4):
             nan = np.full(M, np.nan)
             return q * np.nan, v * np.nan, np.full((M, 3), np.nan), np.full(nv, np.nan), nan
@@ -402,6 +579,7 @@ def osc_trial(
     marker_joint: np.ndarray,
     marker_offset: FloatArray,
     q_init: FloatArray,
+    v_init: FloatArray,
     X: FloatArray,
     Xd: FloatArray,
     Xdd: FloatArray,
@@ -418,21 +596,26 @@ def osc_trial(
     gains: FloatArray,
     dt_frame: float,
     n_sub: int,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Run :func:`osc_frame` over a whole trial X (N, M, 3) with target velocities Xd and
-    accelerations Xdd (N, M, 3). Frame 0 starts from ``q_init`` at rest, holding frame 0.
-    Returns Q (N, nq), P (N, M, 3), ΔQ (N, nv), E (N, M).
+    first: int,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Run :func:`osc_frame` over frames ``first`` .. N-1 of X (N, M, 3) with target
+    velocities Xd and accelerations Xdd (N, M, 3), from the state ``q_init``, ``v_init``
+    at frame ``first - 1``; ``first = 0``: frame 0 starts from ``q_init`` at rest, holding
+    frame 0. Returns Q (n, nq), P (n, M, 3), ΔQ (n, nv), E (n, M) of those n = N - first
+    frames and the last velocity (nv,). A trial run in blocks (``first = 1`` on a block
+    that repeats the previous block's last frame) gives the same numbers as in one call.
     """
     N, M = X.shape[0], X.shape[1]
     nq = q_init.shape[0]
     nv = nq - 1
-    Q = np.empty((N, nq))
-    P = np.empty((N, M, 3))
-    DQ = np.empty((N, nv))
-    E = np.empty((N, M))
+    n = N - first
+    Q = np.empty((n, nq))
+    P = np.empty((n, M, 3))
+    DQ = np.empty((n, nv))
+    E = np.empty((n, M))
     q = q_init.copy()
-    v = np.zeros(nv)
-    for f in range(N):
+    v = v_init.copy()
+    for f in range(first, N):
         if f == 0:
             x0, xd0, xdd0 = X[0], np.zeros((M, 3)), np.zeros((M, 3))
         else:
@@ -442,8 +625,8 @@ def osc_trial(
             q, v, x0, X[f], xd0, xdd0, row_weight, level_ptr, level_markers, dof_ptr,
             dof_markers, lock_dof, lock_value, lower, upper, q_posture, gains, dt_frame, n_sub,
         )  # fmt: skip
-        Q[f] = q
-        P[f] = Pf
-        DQ[f] = dq
-        E[f] = e
-    return Q, P, DQ, E
+        Q[f - first] = q
+        P[f - first] = Pf
+        DQ[f - first] = dq
+        E[f - first] = e
+    return Q, P, DQ, E, v

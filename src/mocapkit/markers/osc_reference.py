@@ -16,6 +16,7 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.body.human_model import HumanModel
 from mocapkit.markers.kinematics import MarkerKinematics
+from mocapkit.markers.osc_kernels import LIMIT_ROUNDS, STEP_GROWTH, STEP_HALVINGS
 from mocapkit.markers.prioritized import RANK_TOLERANCE
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -183,8 +184,9 @@ class ReferenceStepper:
         dq = np.zeros(nv)
         for j in range(n_sub):
             s = j * dt
-            Amat = pin.crba(model, data, q).copy()
-            h = pin.nonLinearEffects(model, data, q, v).copy()
+            if j == 0:  # the kernel's: rigid-body terms once per capture frame
+                Amat = pin.crba(model, data, q).copy()
+                h = pin.nonLinearEffects(model, data, q, v).copy()
             P, J = self.kin.reference_positions_jacobians(q)
             B = self.kin.reference_bias(q, v)
             Jm: list[FloatArray] = []
@@ -216,33 +218,80 @@ class ReferenceStepper:
             rows, target = self._lock_rows(
                 q, v, lock_dof, lock_value, lower, upper, determined, push
             )
-            lock_J = np.zeros((len(rows), nv))
-            lock_acc = []
-            for c, (iq, tgt) in enumerate(zip(rows, target, strict=True)):
-                lock_J[c, iq - 1] = 1.0
-                lock_acc.append(kpl * (tgt - q[iq]) - kdl * v[iq - 1])
-            ptr = [0, len(rows), *(len(rows) + p for p in mptr)]
+            cols = [int(iq) - 1 for iq in rows]
+            lock_acc = [
+                kpl * (tgt - q[iq]) - kdl * v[iq - 1] for iq, tgt in zip(rows, target, strict=True)
+            ]
             a_post = -kdp * v
             a_post[6:] += kpp * (q_posture[7:] - q[7:])
-            Gamma, Jbar = prioritized_torque_reference(
-                Amat, h, np.vstack([lock_J, Jmat]), np.array(lock_acc + accm),
-                np.array([0.0] * len(rows) + biasm), ptr, a_post, damping, True,
-            )  # fmt: skip
+            for _round in range(LIMIT_ROUNDS):  # the kernel's active set of the limits
+                lock_J = np.zeros((len(cols), nv))
+                for c, iv in enumerate(cols):
+                    lock_J[c, iv] = 1.0
+                ptr = [0, len(cols), *(len(cols) + p for p in mptr)]
+                Gamma, Jbar = prioritized_torque_reference(
+                    Amat, h, np.vstack([lock_J, Jmat]), np.array(lock_acc + accm),
+                    np.array([0.0] * len(cols) + biasm), ptr, a_post, damping, True,
+                )  # fmt: skip
+                qdd = np.linalg.solve(Amat, Gamma - h)
+                q_next = q[7:] + (v[6:] + qdd[6:] * dt) * dt
+                cross = [
+                    k for k in range(nv - 6)
+                    if 6 + k not in cols
+                    and (q_next[k] < lower[7 + k] - 1e-12 or q_next[k] > upper[7 + k] + 1e-12)
+                ]  # fmt: skip
+                if not cross:
+                    break
+                for k in cross:
+                    limit = lower[7 + k] if q_next[k] < lower[7 + k] else upper[7 + k]
+                    cols.append(6 + k)
+                    lock_acc.append((limit - q[7 + k] - v[6 + k] * dt) / (dt * dt))
             if dx:
-                dq = Jbar[:, len(rows) :] @ np.array(dx)  # eq. 15, the last step's errors
-            qdd = np.linalg.solve(Amat, Gamma - h)
-            v = v + qdd * dt
-            lin, ang = np.linalg.norm(v[:3]), np.linalg.norm(v[3:6])
+                dq = Jbar[:, len(cols) :] @ np.array(dx)  # eq. 15, the last step's errors
+            v_new = v + qdd * dt
+            lin, ang = np.linalg.norm(v_new[:3]), np.linalg.norm(v_new[3:6])
             if lin > 0.25 * max_speed:
-                v[:3] *= 0.25 * max_speed / lin
+                v_new[:3] *= 0.25 * max_speed / lin
             if ang > max_speed:
-                v[3:6] *= max_speed / ang
-            v[6:] = np.clip(v[6:], -max_speed, max_speed)
-            q = np.asarray(pin.integrate(model, q, v * dt))
-            low, high = q[7:] < lower[7:], q[7:] > upper[7:]
-            q[7:] = np.clip(q[7:], lower[7:], upper[7:])
-            v[6:][low] = np.maximum(v[6:][low], 0.0)
-            v[6:][high] = np.minimum(v[6:][high], 0.0)
+                v_new[3:6] *= max_speed / ang
+            v_new[6:] = np.clip(v_new[6:], -max_speed, max_speed)
+            # the kernel's step safeguard: a step away from the targets is shortened
+            s_next = s + dt
+            x_next = np.where(
+                np.isfinite(x0[:, :1]), x0 + xd0 * s_next + 0.5 * xdd0 * s_next**2, x1
+            )
+
+            def errors(P_: FloatArray, x_next: FloatArray = x_next) -> FloatArray:
+                out = np.zeros(len(level_ptr) - 1)
+                for lv in range(len(level_ptr) - 1):
+                    ms = [int(m) for m in level_markers[level_ptr[lv] : level_ptr[lv + 1]]]
+                    ms = [m for m in ms if tracked[m]]
+                    d = x_next[ms] - P_[ms]
+                    out[lv] = float(np.sum(row_weight[ms][:, None] * d * d))
+                return out
+
+            def worse(e_try: FloatArray, e_hold: FloatArray, slack: FloatArray) -> bool:
+                for a, b, sl in zip(e_try, e_hold, slack, strict=True):
+                    if a > STEP_GROWTH * b + sl:
+                        return True
+                    if a < b - sl:
+                        return False
+                return False
+
+            err_hold = errors(P)
+            slack = 1e-6 * np.diff(np.array([0, *mptr], dtype=float)) / 3.0
+            for half in range(STEP_HALVINGS + 1):
+                q_try = np.asarray(pin.integrate(model, q, v_new * dt))
+                q_try[7:] = np.clip(q_try[7:], lower[7:], upper[7:])
+                if half == STEP_HALVINGS:
+                    break
+                if not worse(errors(self.kin.positions(q_try)), err_hold, slack):
+                    break
+                v_new = 0.5 * v_new
+            low, high = q_try[7:] <= lower[7:], q_try[7:] >= upper[7:]
+            v_new[6:][low] = np.maximum(v_new[6:][low], 0.0)
+            v_new[6:][high] = np.minimum(v_new[6:][high], 0.0)
+            q, v = q_try, v_new
         P = self.kin.positions(q)
         err = np.full(M, np.nan)
         vis = np.isfinite(x1[:, 0])

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -36,7 +36,9 @@ log = logging.getLogger(__name__)
 
 Method = Literal["osc", "ik"]
 Mode = Literal["offline", "online"]
-RIGID_PAIR_TOLERANCE_M = 0.015
+RIGID_PAIR_TOLERANCE_M = 0.015  # above: a warning (skin motion, a marker moved)
+RIGID_PAIR_REFUSE_M = 0.04  # above: another subject, or swapped labels
+STATIC_SPEED_REFUSE_M_S = 0.1  # a "static" trial whose stillest 0.5 s moves this fast
 DEFAULT_MASS_KG = 75.0
 
 
@@ -182,23 +184,77 @@ def prepare(
     return trial, static, report
 
 
-def estimate_height(traj: MarkerTrajectories) -> float:
-    """Stature [m] ~ median vertical extent of the markers (z-up): the head markers sit about
-    a marker radius above the vertex, the foot markers about as far above the floor."""
+ACROMION_HEIGHT_RATIO = 0.818  # acromion height / stature (Drillis & Contini; de Leva)
+_FEET = ("foot_r", "foot_l", "toes_r", "toes_l")
+_SHOULDERS = ("clavicle_r", "clavicle_l")
+
+
+def _extent(z: FloatArray) -> float | None:
+    """Median over frames of the vertical extent of the visible markers (z (N, M)), or
+    None when no frame shows two of them."""
+    seen = np.isfinite(z).sum(axis=1) >= 2
+    if not seen.any():
+        return None
+    zs = z[seen]
+    top = np.max(np.where(np.isfinite(zs), zs, -np.inf), axis=1)
+    bottom = np.min(np.where(np.isfinite(zs), zs, np.inf), axis=1)
+    return float(np.median(top - bottom))
+
+
+def estimate_height(
+    traj: MarkerTrajectories, ms: MarkerSet | None = None, warnings: _Warnings | None = None
+) -> float:
+    """Stature [m] from the markers (z-up).
+
+    With head and foot markers: the median vertical extent of the markers (the head markers
+    sit about a marker radius above the vertex, the foot markers about as far above the
+    floor). Without head markers but with shoulders and feet: the acromion height over
+    :data:`ACROMION_HEIGHT_RATIO` (a population ratio: a few centimetres either way), with
+    a loud warning. Otherwise (or without a marker set to tell): refused, pass --height-m.
+    """
     from mocapkit.body.anthropometry import HEIGHT_RANGE_M
 
     z = traj.positions[..., 2]
-    seen = np.isfinite(z).sum(axis=1) >= 2  # frames with a vertical extent at all
-    if not seen.any():
+    if ms is not None:
+        seg = {m.name: m.segment for m in ms.markers}
+        cols = {s: [i for i, n in enumerate(traj.names) if seg.get(n) in s]
+                for s in (("head",), _FEET, _SHOULDERS)}  # fmt: skip
+        head, feet, shoulders = (cols[("head",)], cols[_FEET], cols[_SHOULDERS])
+        if not feet or not (head or shoulders):
+            lacking = "foot" if not feet else "head or shoulder"
+            raise DataError(
+                f"cannot estimate the stature: the trial has no {lacking} markers (the "
+                "markers' height range would not be the body's); pass --height-m"
+            )
+        if not head:
+            with np.errstate(invalid="ignore"):
+                floor = np.nanmin(z[:, feet], axis=1)
+                acromion = np.nanmean(z[:, shoulders], axis=1) - floor
+            acromion = acromion[np.isfinite(acromion)]
+            if acromion.size == 0:
+                raise DataError(
+                    "cannot estimate the stature: no frame shows a shoulder and a foot "
+                    "marker together; pass --height-m"
+                )
+            h = float(np.median(acromion)) / ACROMION_HEIGHT_RATIO
+            if warnings is not None:
+                warnings.add(
+                    f"NO HEAD MARKERS: the stature ({h:.3f} m) is estimated from the "
+                    f"shoulder markers' height / {ACROMION_HEIGHT_RATIO} (a population ratio, "
+                    "+-4 %); segment lengths and masses scale with it. Pass --height-m"
+                )
+            if not (HEIGHT_RANGE_M[0] <= h <= HEIGHT_RANGE_M[1]):
+                raise DataError(
+                    f"cannot estimate the stature from the shoulder markers ({h:.2f} m); "
+                    "pass --height-m"
+                )
+            return h
+    extent = _extent(z)
+    if extent is None:
         raise DataError(
             "cannot estimate the stature: no frame shows two markers at once; pass --height-m"
         )
-    zs = z[seen]
-    extent = np.max(np.where(np.isfinite(zs), zs, -np.inf), axis=1) - np.min(
-        np.where(np.isfinite(zs), zs, np.inf), axis=1
-    )
-    h = float(np.median(extent))
-
+    h = extent
     if not (HEIGHT_RANGE_M[0] <= h <= HEIGHT_RANGE_M[1]):
         raise DataError(
             f"cannot estimate the stature from the markers (vertical extent {h:.2f} m); "
@@ -222,19 +278,44 @@ def check_static_matches(
     for names in by_seg.values():
         for i, a in enumerate(names):
             for b in names[i + 1 :]:
-                with np.errstate(invalid="ignore"):
-                    ds = np.nanmedian(np.linalg.norm(static.marker(a) - static.marker(b), axis=1))
-                    dt = np.nanmedian(np.linalg.norm(trial.marker(a) - trial.marker(b), axis=1))
-                if not (np.isfinite(ds) and np.isfinite(dt)):
+                d_s = np.linalg.norm(static.marker(a) - static.marker(b), axis=1)
+                d_t = np.linalg.norm(trial.marker(a) - trial.marker(b), axis=1)
+                d_s, d_t = d_s[np.isfinite(d_s)], d_t[np.isfinite(d_t)]
+                if d_s.size == 0 or d_t.size == 0:
                     continue
+                ds, dt = float(np.median(d_s)), float(np.median(d_t))
                 if worst is None or abs(ds - dt) > worst[0]:
                     worst = (abs(ds - dt), a, b, float(ds), float(dt))
-    if worst is not None and worst[0] > RIGID_PAIR_TOLERANCE_M:
-        _, a, b, ds, dt = worst
+    if worst is None or worst[0] <= RIGID_PAIR_TOLERANCE_M:
+        return
+    _, a, b, ds, dt = worst
+    what = (
+        f"markers {a} and {b} sit on one segment but are {ds * 1000:.0f} mm apart in the "
+        f"static trial and {dt * 1000:.0f} mm in the trial"
+    )
+    if worst[0] > RIGID_PAIR_REFUSE_M:
         raise DataError(
-            f"the static trial does not match the trial: markers {a} and {b} sit on one segment "
-            f"but are {ds * 1000:.0f} mm apart in the static trial and {dt * 1000:.0f} mm in the "
-            "trial. Use the same subject's static trial (or fix swapped labels)"
+            f"the static trial does not match the trial: {what}. Use the same subject's "
+            "static trial (or fix swapped labels)"
+        )
+    warnings.add(
+        f"the static trial and the trial differ: {what} (a marker moved between them, or "
+        "skin motion); its registered offset may be off by that much"
+    )
+
+
+def check_static_still(static: MarkerTrajectories) -> None:
+    """Refuse a static trial that moves (a walking trial given as the static one): its
+    stillest 0.5 s would be scaled as a standing pose."""
+    from mocapkit.body.scaling import STATIC_WINDOW_S, static_speed
+
+    speed = static_speed(static.time, static.positions)
+    if speed > STATIC_SPEED_REFUSE_M_S:
+        raise DataError(
+            f"{static.meta.get('source', 'static trial')}: not a static trial: its stillest "
+            f"{STATIC_WINDOW_S:.1f} s still moves at {speed * 1000:.0f} mm/s (mean marker "
+            "speed). Pass a recording of the subject standing still, or omit --static to "
+            "estimate the limb lengths from the trial"
         )
 
 
@@ -297,13 +378,23 @@ def _warm_up(
         )  # fmt: skip
 
 
+Progress = Callable[[str, float, float], None]  # (step, done, total): a progress bar
+
+
 def reconstruct(
     trial: MarkerTrajectories,
     subject: Subject,
     options: ReconstructionOptions,
     warnings: list[str] | None = None,
+    progress: Progress | None = None,
 ) -> ReconstructionResult:
-    """Joint angles for a prepared trial (metres, z-up, set names)."""
+    """Joint angles for a prepared trial (metres, z-up, set names); ``progress(step, done,
+    total)`` is told how the long steps advance."""
+
+    def solve_progress(done: int, total: int) -> None:
+        if progress is not None:
+            progress("reconstruction", done, total)
+
     warn = _Warnings(warnings or [])
     human, ms = subject.human, subject.markerset
     tasks, notes = resolve_coordinate_tasks(human, ms.coordinate_tasks)
@@ -332,10 +423,11 @@ def reconstruct(
     rate = trial.rate_hz
     _warm_up(subject, names, X, weights, levels, q_init, rate, options)
     t0 = time.perf_counter()
+    P = None
     if options.method == "ik":
         sol = solve_ik(
             human, names, X, weights, q_init, tasks, q_posture=human.neutral(),
-            params=options.ik,
+            params=options.ik, progress=solve_progress,
         )  # fmt: skip
         elapsed = time.perf_counter() - t0
         Q = sol.q
@@ -354,16 +446,27 @@ def reconstruct(
             Q = np.array([f.q for f in frames])
             dq = np.array([f.dq for f in frames])
         else:
-            Q, _, dq, _ = reconstruct_offline(
+            Q, P, dq, _ = reconstruct_offline(
                 human, names, X, rate, levels, tasks, q_init, human.neutral(),
-                options.osc, wmap,
+                options.osc, wmap, progress=solve_progress,
             )  # fmt: skip
             elapsed = time.perf_counter() - t0
     result = ReconstructionResult.build(
         trial.time, human, names, tracked, X, Q, dq, elapsed, options.method, options.mode,
         [list(level) for level in levels], tasks, warn, weights,
-        with_total=options.total_bound,
+        with_total=options.total_bound, P=P, progress=progress,
     )  # fmt: skip
+    result.rate_hz = rate
+    result.meta["file_up_axis"] = trial.meta.get("converted_from_up_axis", "z")
+    if trial.meta.get("c3d") is not None:
+        result.meta["c3d"] = trial.meta["c3d"]
+    if not np.isfinite(result.coordinates[:, result.fitted_angles]).any():
+        raise DataError(
+            f"the {len(tracked)} tracked markers ({', '.join(tracked[:8])}"
+            f"{' ...' if len(tracked) > 8 else ''}) determine no joint angle of the model: "
+            "its pelvis and trunk stay free. Track more markers (--grouping paper puts the "
+            "paper's levels above all the others; the default is single)"
+        )
     if unregistered & set(tracked):
         warn.add(
             f"markers {', '.join(sorted(unregistered & set(tracked)))} were not in the static "
@@ -411,6 +514,43 @@ def apply_ik_setup(
     return ms, options
 
 
+KNOWN_SET_FRACTION = 0.6  # a preset must name this share of the trial's labels
+
+
+def choose_markerset(trial: MarkerTrajectories, warnings: _Warnings) -> MarkerSet:
+    """The preset that names most of the trial's labels when it names most of them and
+    covers the lower limbs; else a set assigned from the labels and the motion
+    (:mod:`mocapkit.body.markerset_auto`), reported in a warning; else an error with the
+    markers and a YAML to write."""
+    from mocapkit.body.markerset_auto import auto_markerset, require_lower_limbs
+
+    src = trial.meta.get("source", "trial")
+    ever = np.asarray(trial.visible.any(axis=0))
+    seen = [n for n, v in zip(trial.names, ever.tolist(), strict=True) if v]
+    try:
+        ms, match = guess_markerset(trial.names)
+    except ConfigError:
+        ms, match = None, None
+    if ms is not None and match is not None:
+        share = len(match.index) / max(1, len(seen))
+        present = [n for n in ms.names if n in match.index]
+        covered = {ms.spec(n).segment for n in present}
+        from mocapkit.body.markerset_auto import LOWER_LIMB
+
+        if share >= KNOWN_SET_FRACTION and all(s in covered for s in LOWER_LIMB):
+            log.info("marker set %s matches %d of the trial's labels", ms.name, len(match.index))
+            return ms
+    auto, report = auto_markerset(seen, trial.select(seen).positions)
+    require_lower_limbs(auto, seen, str(src))
+    warnings.add(
+        f"{src}: no preset knows these labels ({', '.join(seen[:6])}...); markers assigned to "
+        "segments from their labels and the motion (*: by moving rigidly with that "
+        "segment): " + "; ".join(report.lines()) + ". Check it; to change it, save it "
+        "(markers reconstruct --save-markerset FILE), edit and pass --markerset FILE"
+    )
+    return auto
+
+
 def run(
     trial_path: str | Path,
     static_path: str | Path | None,
@@ -420,6 +560,7 @@ def run(
     options: ReconstructionOptions | None = None,
     sex: Sex = "male",
     ik_setup: str | Path | None = None,
+    progress: Progress | None = None,
 ) -> tuple[ReconstructionResult, Subject, CleaningReport]:
     """Files to joint angles: load, check, clean, calibrate, reconstruct.
 
@@ -431,24 +572,47 @@ def run(
     warn = _Warnings()
     trial = load_markers(trial_path, opts.units)
     static = load_markers(static_path, opts.units) if static_path is not None else None
+    if static_path is not None and Path(static_path).resolve() == Path(trial_path).resolve():
+        raise ConfigError(
+            f"--static {static_path} is the trial itself; a static trial is a separate "
+            "recording of the subject standing still. Pass it, or omit --static to estimate "
+            "the limb lengths from the trial"
+        )
     if markerset is None:
-        ms, match = guess_markerset(trial.names)
-        log.info("marker set %s matches %d of the trial's labels", ms.name, len(match.index))
+        ms = choose_markerset(trial, warn)
     else:
         ms = load_markerset(markerset)
     if ik_setup is not None:
         ms, opts = apply_ik_setup(ms, opts, ik_setup, warn)
     trial, static, cleaning = prepare(trial, static, ms, opts, warn)
     if static is not None:
+        check_static_still(static)
         check_static_matches(static, trial, ms, warn)
     if height_m is None:
-        height_m = estimate_height(static if static is not None else trial)
-        warn.add(f"no --height-m given: {height_m:.3f} m estimated from the markers' extent")
+        n_before = len(warn)
+        height_m = estimate_height(static if static is not None else trial, ms, warn)
+        if len(warn) == n_before:
+            warn.add(
+                f"no --height-m given: {height_m:.3f} m estimated from the markers' extent "
+                "(head to feet)"
+            )
     if mass_kg is None:
         mass_kg = DEFAULT_MASS_KG
-        warn.add(f"no --mass-kg given: {mass_kg:.0f} kg assumed for the segment masses")
-    subject = calibrate(static, trial, ms, height_m, mass_kg, sex)
-    result = reconstruct(trial, subject, opts, list(warn))
+        warn.add(
+            f"no --mass-kg given: {mass_kg:.0f} kg assumed for the segment masses (they set "
+            "the simulated dynamics of direct marker control, not IK's angles)"
+        )
+    scale_static = static
+    if static is not None and ms.description.startswith("assigned automatically"):
+        warn.add(
+            "the marker set was assigned automatically, so its markers have no known place "
+            "on their segments to start a static registration from: the limb lengths and "
+            "marker places are estimated from the trial's motion; the static trial gave the "
+            "stature only"
+        )
+        scale_static = None
+    subject = calibrate(scale_static, trial, ms, height_m, mass_kg, sex)
+    result = reconstruct(trial, subject, opts, list(warn), progress)
     result.meta.update(
         {
             "marker_set": ms.name,

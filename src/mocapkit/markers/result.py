@@ -12,7 +12,7 @@ of the figures' means and maxima, and counted in a warning.
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,7 +22,11 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.body.human_model import HumanModel
 from mocapkit.markers.bounds import POORLY_DETERMINED_DEG_PER_MM, BoundReport, bound_report
-from mocapkit.markers.coordinates import coordinate_map, coordinates_and_gimbal
+from mocapkit.markers.coordinates import (
+    CoordinateMap,
+    coordinate_map,
+    coordinates_and_gimbal,
+)
 from mocapkit.markers.determined import column_determined, dof_determined
 from mocapkit.markers.kinematics import MarkerKinematics
 
@@ -47,6 +51,11 @@ class ReconstructionResult:
             for the reported coordinates, which the figures use.
         levels: the marker subsets in priority order.
         elapsed_s: wall time of the reconstruction loop.
+        rate_hz: the trial's declared frame rate (the time column may be rounded).
+        held: (K,) coordinates held by a coordinate task (not fitted to markers).
+        model_dof_names, model_dof_values: the model's DOFs that OpenSim's coordinates are
+            computed from (the spine, neck and shoulders), (N, k) [rad]; NaN where the
+            coordinates computed from them are.
         bound: the bound's report (capped entries, conditioning per frame and DOF).
     """
 
@@ -68,6 +77,10 @@ class ReconstructionResult:
     bound: BoundReport | None = None
     warnings: list[str] = field(default_factory=list)
     meta: dict[str, Any] = field(default_factory=dict)
+    rate_hz: float | None = None
+    held: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    model_dof_names: tuple[str, ...] = ()
+    model_dof_values: FloatArray | None = None
 
     @classmethod
     def build(
@@ -87,22 +100,28 @@ class ReconstructionResult:
         warnings: list[str],
         weights: FloatArray | None = None,
         with_total: bool = True,
+        P: FloatArray | None = None,
+        progress: Callable[[str, float, float], None] | None = None,
     ) -> ReconstructionResult:
         """Errors, named coordinates (NaN where undetermined) and the bound's report;
         ``weights`` (M,) of ``names`` (default 1) weigh the conditioning's fit;
-        ``with_total``: also the bound that holds (``bound.total``)."""
-        kin = MarkerKinematics(human, names)
-        P = np.array([kin.positions(q) for q in Q]).reshape(X.shape)
+        ``with_total``: also the bound that holds (``bound.total``); ``P`` (N, M, 3): the
+        model's markers at Q when the method already has them."""
+        if P is None:
+            P = marker_positions(human, names, Q)
+        P = np.asarray(P, dtype=float).reshape(X.shape)
         errors = np.linalg.norm(P - X, axis=2)
         cmap = coordinate_map(human)
         coords, gimbal = coordinates_and_gimbal(human, Q, cmap)
+        coords = unwrap_in_time(coords, range(3, 6))  # a subject who turns: no +-180 jumps
         root, dofs = dof_determined(human, names, tracked, X, held=locked)
         det = column_determined(cmap, root, dofs)
         w = np.ones(len(names)) if weights is None else np.asarray(weights, dtype=float)
         in_fit = np.array([n in set(tracked) for n in names])
         report = bound_report(
             human, cmap, names, Q, X, np.where(in_fit, w, 0.0), dq, root, dofs,
-            held=list(locked), columns=det, with_total=with_total,
+            held=list(locked), columns=det, with_total=with_total, coords=coords,
+            progress=progress,
         )  # fmt: skip
         structural = det
         det = det & ~report.unobserved
@@ -114,6 +133,7 @@ class ReconstructionResult:
             warnings.append(msg)
             log.warning("%s", msg)
         cnames = cmap.names
+        behind, behind_values = _dofs_behind(human, cmap, Q, coords)
         return cls(
             time=t,
             q=Q,
@@ -132,6 +152,11 @@ class ReconstructionResult:
             angular=cmap.angular,
             bound=report,
             warnings=warnings,
+            held=np.array(
+                [kind == "dof" and human.dof_names[a] in locked for kind, a, _ in cmap.source]
+            ),
+            model_dof_names=tuple(human.dof_names[i] for i in behind),
+            model_dof_values=behind_values,
         )
 
     # -- figures ---------------------------------------------------------------------------
@@ -169,10 +194,17 @@ class ReconstructionResult:
             return np.full(self.coordinates.shape, np.nan)
         return self.bound.dc
 
+    @property
+    def fitted_angles(self) -> np.ndarray:
+        """(K,) bool: rotational coordinates a marker fit determines (not the translations,
+        not those a coordinate task holds, whose bound is 0 by construction)."""
+        held = self.held if self.held.shape == self.angular.shape else np.zeros_like(self.angular)
+        return self.angular & ~held
+
     def dq_extremes(self) -> tuple[FloatArray, FloatArray]:
-        """Per frame Δq_max and Δq_min over the determined rotational coordinates (eq. 17)
-        [rad]; NaN in frames where none is determined."""
-        rot = self.coordinate_bound[:, self.angular]
+        """Per frame Δq_max and Δq_min over the determined rotational coordinates that
+        markers fit (eq. 17) [rad]; NaN in frames where none is determined."""
+        rot = self.coordinate_bound[:, self.fitted_angles]
         has = np.isfinite(rot).any(axis=1)
         hi = np.full(rot.shape[0], np.nan)
         lo = np.full(rot.shape[0], np.nan)
@@ -188,7 +220,7 @@ class ReconstructionResult:
         rms = self.frame_rms(markers)
         e = self._errors_of(markers)
         seen = np.isfinite(rms)
-        bound = np.abs(self.coordinate_bound[:, self.angular])
+        bound = np.abs(self.coordinate_bound[:, self.fitted_angles])
         has = np.isfinite(bound)
 
         def rounded(x: float | None, digits: int) -> float | None:
@@ -204,7 +236,7 @@ class ReconstructionResult:
             ),
         }
         if self.bound is not None and self.bound.total is not None:
-            tot = self.bound.total[:, self.angular]
+            tot = self.bound.total[:, self.fitted_angles]
             fin = np.isfinite(tot)
             out["joint_error_total_bound_deg_max"] = rounded(
                 np.degrees(tot[fin].max()) if fin.any() else None, 3
@@ -215,7 +247,7 @@ class ReconstructionResult:
         return self.coordinates[:, self.coordinate_names.index(name)]
 
     # -- files -----------------------------------------------------------------------------
-    def _output_columns(self) -> tuple[list[str], FloatArray]:
+    def _output_columns(self, with_model_dofs: bool = False) -> tuple[list[str], FloatArray]:
         keep = [
             k
             for k in range(len(self.coordinate_names))
@@ -224,13 +256,25 @@ class ReconstructionResult:
         data = self.coordinates[:, keep].copy()
         ang = self.angular[keep]
         data[:, ang] = np.degrees(data[:, ang])
-        return [self.coordinate_names[k] for k in keep], data
+        labels = [self.coordinate_names[k] for k in keep]
+        if with_model_dofs and self.model_dof_values is not None:
+            extra = [
+                i for i in range(len(self.model_dof_names))
+                if np.isfinite(self.model_dof_values[:, i]).any()
+            ]  # fmt: skip
+            labels += [self.model_dof_names[i] for i in extra]
+            data = np.column_stack([data, np.degrees(self.model_dof_values[:, extra])])
+        return labels, data
 
     def write_mot(self, path: str | Path) -> Path:
-        """OpenSim ``.mot`` (degrees, pelvis in OpenSim's y-up ground; see coordinates)."""
+        """OpenSim ``.mot`` (degrees, pelvis in OpenSim's y-up ground; see coordinates):
+        OpenSim's coordinate names, then the model's own DOFs behind the computed ones
+        (``abdomen_*``, ``thorax_*``, ``cervical_*``, ``head_extension``, ``shoulder_*``),
+        so the same file poses mocapkit's exported model (:mod:`mocapkit.io.osim_model`)
+        exactly; OpenSim ignores columns a model does not have."""
         from mocapkit.io.opensim_table import write_table
 
-        labels, data = self._output_columns()
+        labels, data = self._output_columns(with_model_dofs=True)
         return write_table(path, self.time, labels, data, name="mocapkit_markers", in_degrees=True)
 
     def write_csv(self, path: str | Path) -> Path:
@@ -243,16 +287,96 @@ class ReconstructionResult:
         np.savetxt(p, rows, delimiter=",", header=",".join(header), comments="", fmt="%.8g")
         return p
 
-    def write_tracked_trc(self, path: str | Path) -> Path:
-        """The model's markers over time as a TRC file (z-up world, mm)."""
-        from mocapkit.io.trc import write_trc
+    def write_tracked_c3d(self, path: str | Path) -> Path:
+        """The model's markers as a C3D file (mm) in the trial file's own axes, so it
+        overlays the captured markers; a C3D trial's analogs, force platforms and events
+        are written with them (:func:`mocapkit.io.c3d.write_c3d`)."""
+        from mocapkit.io.c3d import C3DExtras, write_c3d
         from mocapkit.markers.trajectories import MarkerTrajectories
 
-        rate = 1.0 / float(np.median(np.diff(self.time))) if self.n_frames > 1 else 0.0
+        rate = self.rate_hz or (1.0 / float(np.median(np.diff(self.time))))
         traj = MarkerTrajectories(
-            self.time, self.tracked_positions, self.marker_names, meta={"rate_hz": rate}
+            _exact_times(self.time, rate), self.tracked_positions @ _file_axes(self).T,
+            self.marker_names, meta={"rate_hz": rate},
+        )  # fmt: skip
+        extras = self.meta.get("c3d")
+        return write_c3d(path, traj, extras if isinstance(extras, C3DExtras) else None)
+
+    def write_tracked_trc(self, path: str | Path) -> Path:
+        """The model's markers over time as a TRC file (mm) in OpenSim's y-up ground, the
+        frame of the .mot's pelvis columns (``v_os = (x, z, -y)`` of our z-up world), at
+        the trial's exact frame rate."""
+        from mocapkit.io.trc import write_trc
+        from mocapkit.markers.coordinates import Z_UP_TO_OPENSIM
+        from mocapkit.markers.trajectories import MarkerTrajectories
+
+        rate = self.rate_hz
+        if rate is None:
+            rate = 1.0 / float(np.median(np.diff(self.time))) if self.n_frames > 1 else 0.0
+        traj = MarkerTrajectories(
+            _exact_times(self.time, rate),
+            self.tracked_positions @ Z_UP_TO_OPENSIM.T,
+            self.marker_names,
+            meta={"rate_hz": rate, "up_axis": "y"},
         )
-        return write_trc(path, traj)
+        return write_trc(path, traj, rate_hz=rate)
+
+
+def _dofs_behind(
+    human: HumanModel, cmap: CoordinateMap, Q: FloatArray, coords: FloatArray
+) -> tuple[list[int], FloatArray]:
+    """The model DOFs (indices into ``q[7:]``) that reported coordinates are computed from
+    and that are not reported under their own name, and their values (N, k) [rad], NaN in
+    frames where any coordinate of their joint is NaN."""
+    reported = {a for kind, a, _ in cmap.source if kind == "dof"}
+    idx: list[int] = []
+    cols: list[FloatArray] = []
+    for c, ch in enumerate(cmap.chains):
+        ks = [k for k, (kind, a, _) in enumerate(cmap.source) if kind == "derived" and a == c]
+        undetermined = ~np.isfinite(coords[:, ks]).all(axis=1)
+        for d in ch.dofs:
+            if d in reported or d in idx:
+                continue
+            idx.append(d)
+            cols.append(np.where(undetermined, np.nan, Q[:, 7 + d]))
+    return idx, (np.column_stack(cols) if cols else np.zeros((len(Q), 0)))
+
+
+def unwrap_in_time(values: FloatArray, columns: Iterable[int]) -> FloatArray:
+    """A copy of ``values`` (N, K) [rad] whose ``columns`` are continuous in time: each
+    step takes the 2 pi branch nearest the previous finite value (NaN gaps skipped)."""
+    out = np.array(values, dtype=float, copy=True)
+    for k in columns:
+        fin = np.flatnonzero(np.isfinite(out[:, k]))
+        if fin.size > 1:
+            out[fin, k] = np.unwrap(out[fin, k])
+    return out
+
+
+def _exact_times(time: FloatArray, rate: float) -> FloatArray:
+    """``time[0] + k / rate`` when ``time`` is that clock to a quarter frame (a time column
+    rounded to a few decimals in the input file), else ``time``."""
+    regular = time[0] + np.arange(len(time)) / rate
+    return regular if np.abs(time - regular).max() <= 0.25 / rate else np.asarray(time)
+
+
+def _file_axes(result: ReconstructionResult) -> FloatArray:
+    """R with x_file = R x_zup for the trial's file axes (``meta["file_up_axis"]``)."""
+    from mocapkit.markers.conventions import rotation_to_z_up
+
+    return rotation_to_z_up(str(result.meta.get("file_up_axis") or "z")).T
+
+
+def marker_positions(human: HumanModel, names: Sequence[str], Q: FloatArray) -> FloatArray:
+    """(N, M, 3) the model's markers ``names`` at each configuration of Q (N, nq) [m]."""
+    from mocapkit.markers import rigid_fast
+
+    fm = rigid_fast.flatten(human.model, MarkerKinematics(human, names).frame_ids)
+    Qc = np.ascontiguousarray(np.atleast_2d(Q), dtype=float)
+    P = rigid_fast.marker_positions_trial(
+        fm.parent, fm.R0, fm.p0, fm.axis, fm.marker_joint, fm.marker_offset, Qc
+    )
+    return np.asarray(P)
 
 
 def _no_visible_frames(X: FloatArray, names: Sequence[str], tracked: Sequence[str]) -> np.ndarray:

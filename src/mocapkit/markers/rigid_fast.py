@@ -281,6 +281,40 @@ def marker_kinematics(
 
 
 @njit(cache=True)
+def marker_positions(
+    R: FloatArray, t: FloatArray, marker_joint: IntArray, marker_offset: FloatArray
+) -> FloatArray:
+    """Marker positions (M, 3) for joint poses R (nj, 3, 3), t (nj, 3)."""
+    M = marker_joint.shape[0]
+    out = np.empty((M, 3))
+    for m in range(M):
+        x0, x1, x2 = _point(R, t, marker_joint[m], marker_offset[m])
+        out[m, 0], out[m, 1], out[m, 2] = x0, x1, x2
+    return out
+
+
+@njit(cache=True)
+def marker_positions_trial(
+    parent: IntArray,
+    R0: FloatArray,
+    p0: FloatArray,
+    axis: FloatArray,
+    marker_joint: IntArray,
+    marker_offset: FloatArray,
+    Q: FloatArray,
+) -> FloatArray:
+    """Marker positions (N, M, 3) at every configuration of Q (N, nq)."""
+    N, M = Q.shape[0], marker_joint.shape[0]
+    out = np.empty((N, M, 3))
+    for f in range(N):
+        R, t, _S = forward_kinematics(parent, R0, p0, axis, Q[f])
+        for m in range(M):
+            x0, x1, x2 = _point(R, t, marker_joint[m], marker_offset[m])
+            out[f, m, 0], out[f, m, 1], out[f, m, 2] = x0, x1, x2
+    return out
+
+
+@njit(cache=True)
 def _motion_cross_into(v: FloatArray, u: FloatArray, out: FloatArray) -> None:
     """out = (v, w) x_m (u, e) = (w x u + v x e, w x e)."""
     out[0] = v[4] * u[2] - v[5] * u[1] + v[1] * u[5] - v[2] * u[4]

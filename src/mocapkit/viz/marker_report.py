@@ -242,7 +242,7 @@ def write_report(
         "frames_without_visible_marker": int(blind.sum()),
         "figures": [p.name for p in figures],
         "warnings": list(result.warnings),
-        "meta": result.meta,
+        "meta": {k: v for k, v in result.meta.items() if k != "c3d"},
     }
     if ref is not None:
         cols = [f"{c}_{s}" for c in LEG_COLUMNS for s in ("r", "l")]
