@@ -25,7 +25,7 @@ REPO = Path(__file__).resolve().parents[1]
 DOC = REPO / "docs" / "benchmarks.md"
 LOGS = REPO / "out" / "bench"
 #: modules that are not benchmarks (the gain tuners are searches: run them on purpose)
-NOT_BENCHMARKS = {"__init__", "run_all", "tune_gains", "polaris_tune"}
+NOT_BENCHMARKS = {"__init__", "_docs", "run_all", "tune_gains", "polaris_tune"}
 INDEX_START = "<!-- index: written by python -m benchmarks.run_all -->"
 INDEX_END = "<!-- end of index -->"
 

@@ -176,7 +176,7 @@ class BachmannFilter(OrientationFilter):
     def _run_fast(self, inputs: FilterInputs) -> FloatArray:
         m_ref, mag_ok = self._field()
         q = np.array(self.state.quat, dtype=np.float64)
-        out = bachmann_run_kernel(q, *inputs, m_ref, mag_ok, self.params.alpha)
+        out = bachmann_run_kernel(q, *inputs[:6], m_ref, mag_ok, self.params.alpha)
         self.state.quat = q
         return out
 

@@ -38,12 +38,18 @@ Bad input (checked here, once, for every filter; messages name the field and sam
   correction is skipped for that sample (fallback: gyroscope-only for that part);
 - saturation, when the sensor's full-scale range is given in the params: a saturated
   accelerometer sample is not used for correction (its direction is wrong); a
-  saturated gyroscope sample is integrated as clipped, which is the only information
+  saturated gyroscope sample (at the range, or flat-topped: the same reading above
+  4 rad/s three times in a row) is integrated as clipped, which is the only information
   there is, and a :class:`SensorSaturationWarning` names the first such sample;
+  ``polaris`` then re-acquires its inclination and heading (its fault recovery);
+- time gaps (a step longer than ``params.gap_factor`` nominal steps): held over one
+  nominal step, never integrated, with a :class:`TimeGapWarning` naming the sample and
+  the length (``last_report.gaps``); ``polaris`` re-acquires after it;
 - every run leaves counts of these cases in :attr:`OrientationFilter.last_report`.
 
 Timestamps: ``run`` takes an optional per-sample ``dt``; :meth:`run_recording` passes the
-recording's own time steps (so dropped packets are integrated over their true length).
+recording's own time steps (so a few dropped packets are integrated over their true
+length; longer gaps are held, see above).
 The recording's time stamps are validated (strictly increasing) by ``ImuRecording``.
 """
 
@@ -64,6 +70,7 @@ from mocapkit.imu.filters.inputs import (
     FilterInputs,
     RunReport,
     SensorSaturationWarning,
+    TimeGapWarning,
     prepare_inputs,
 )
 from mocapkit.imu.initialisation import (
@@ -93,13 +100,19 @@ class FilterParams:
         init_window_s: duration [s] of the first samples averaged for the automatic
             initialisation (at least one sample).
         acc_range: accelerometer full-scale range [m/s^2], or None (unknown).
-        gyr_range: gyroscope full-scale range [rad/s], or None (unknown).
+        gyr_range: gyroscope full-scale range [rad/s], or None (unknown; a flat-topped
+            gyroscope axis is still detected as clipped).
+        gap_factor: a time step longer than this many nominal steps is a time gap
+            (missing samples, a clock jump): held over one nominal step and warned about,
+            never integrated; ``polaris`` re-acquires its orientation after it. Shorter
+            steps (a few dropped packets) are integrated over their true length.
     """
 
     rate_hz: float
     init_window_s: float = 0.1
     acc_range: float | None = None
     gyr_range: float | None = None
+    gap_factor: float = 5.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
@@ -112,6 +125,10 @@ class FilterParams:
             )
         _check_optional_positive(self.acc_range, "acc_range")
         _check_optional_positive(self.gyr_range, "gyr_range")
+        if not self.gap_factor > 1.0:  # inf switches the check off
+            raise ConfigError(
+                f"gap_factor: expected a number of nominal steps > 1, got {self.gap_factor}"
+            )
 
     @property
     def dt(self) -> float:
@@ -293,12 +310,13 @@ class OrientationFilter(ABC):
             report.mag_rejected,
             report.gyr_saturated,
             initialised_here,
+            report.gaps,
         )
         return out
 
     def _prepare(self, gyr: Any, acc: Any, mag: Any, dt: Any) -> tuple[FilterInputs, RunReport]:
         p = self.params
-        return prepare_inputs(gyr, acc, mag, dt, p.dt, p.acc_range, p.gyr_range)
+        return prepare_inputs(gyr, acc, mag, dt, p.dt, p.acc_range, p.gyr_range, p.gap_factor)
 
     def _initialise_from(self, inputs: FilterInputs) -> None:
         k = min(self.params.init_samples, inputs.gyr.shape[0])
@@ -396,6 +414,7 @@ __all__ = [
     "OrientationFilter",
     "RunReport",
     "SensorSaturationWarning",
+    "TimeGapWarning",
     "available_filters",
     "make_filter",
     "register_filter",

@@ -4,6 +4,7 @@ kernels take (:class:`FilterInputs`) and what was done with doubtful samples
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from dataclasses import dataclass
@@ -21,15 +22,29 @@ MIN_VECTOR_NORM = 1e-6
 _SATURATION_FRACTION = 0.999
 
 
+# A gyroscope axis that sits at its extreme reading of the batch, at least CLIP_MIN_RATE
+# [rad/s], for CLIP_RUN samples in a row is clipped (flat-topped at a range nobody gave):
+# a smooth peak read by a 16-bit converter repeats its top value 2-3 times at most.
+CLIP_MIN_RATE = 4.0
+CLIP_RUN = 5
+
+
 class SensorSaturationWarning(RuntimeWarning):
     """The gyroscope reached its full-scale range: the integrated rotation is too small."""
+
+
+class TimeGapWarning(RuntimeWarning):
+    """A time step far longer than the nominal one: the gap is held, never integrated."""
 
 
 class FilterInputs(NamedTuple):
     """Validated arrays handed to the implementations (all C-contiguous).
 
     ``mag`` is (N, 3) in both modes (zeros where unused); ``use_acc``/``use_mag`` say per
-    sample whether the accelerometer / magnetometer correction applies.
+    sample whether the accelerometer / magnetometer correction applies; ``gap`` marks the
+    samples that follow a time gap (their ``dt`` is already the nominal step) and
+    ``saturated`` the gyroscope samples at the range or clipped: a filter that can
+    restart after a fault (``polaris``) does so at those samples.
     """
 
     gyr: FloatArray
@@ -38,6 +53,8 @@ class FilterInputs(NamedTuple):
     dt: FloatArray
     use_acc: np.ndarray
     use_mag: np.ndarray
+    gap: np.ndarray
+    saturated: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -50,6 +67,7 @@ class RunReport:
     mag_rejected: int = 0  # zero-norm magnetometer: processed as 6D
     gyr_saturated: int = 0  # integrated as clipped (warned)
     initialised_here: bool = False  # the run started by initialising from its first samples
+    gaps: tuple[tuple[int, float], ...] = ()  # (sample, seconds) of each time gap held (warned)
 
 
 def _check_mag_rows(mag: FloatArray) -> np.ndarray:
@@ -82,6 +100,55 @@ def _dt_array(dt: Any, n: int, default: float) -> FloatArray:
     return arr
 
 
+def hold_time_gaps(
+    steps: FloatArray, default_dt: float, gap_factor: float
+) -> tuple[FloatArray, np.ndarray, tuple[tuple[int, float], ...]]:
+    """Time steps longer than ``gap_factor`` nominal steps are gaps (missing samples, a
+    clock that jumped): what the sensor turned through in them is unknown, so integrating
+    the next reading over the whole gap would be wrong by an arbitrary rotation. Such a
+    step is replaced by the nominal one (the gap is held) and warned about, naming the
+    sample and the length. Returns ``(steps, gap_mask, ((sample, seconds), ...))``."""
+    mask = steps > gap_factor * default_dt
+    if not mask.any():
+        return steps, mask, ()
+    where = np.flatnonzero(mask)
+    gaps = tuple((int(i), float(steps[i])) for i in where)
+    first, length = gaps[0]
+    warnings.warn(
+        f"dt: time gap of {length:.3g} s before sample {first} ({len(gaps)} gap(s) longer than "
+        f"{gap_factor:g} nominal steps of {default_dt:.3g} s); held, not integrated: the "
+        "filter re-acquires its orientation after it (polaris) or carries it across. "
+        "Check the recording's clock or fill the gap if the samples exist.",
+        TimeGapWarning,
+        stacklevel=5,  # the caller of OrientationFilter.run
+    )
+    held = steps.copy()
+    held[where] = default_dt
+    return held, mask, gaps
+
+
+def clipped_gyr(g: FloatArray) -> np.ndarray:
+    """(N,) samples where a gyroscope axis is flat-topped: its largest magnitude in the
+    batch, at least ``CLIP_MIN_RATE``, for ``CLIP_RUN`` samples in a row (a range the
+    caller did not give; with ``gyr_range`` any sample at the range counts)."""
+    n = g.shape[0]
+    out = np.zeros(n, dtype=bool)
+    if n < CLIP_RUN:
+        return out
+    mag = np.abs(g)
+    top = mag.max(axis=0)
+    at_top = (mag == top) & (top >= CLIP_MIN_RATE)  # (N, 3)
+    if at_top.sum(axis=0).max() < CLIP_RUN:
+        return out
+    run = at_top[: n - CLIP_RUN + 1].copy()
+    for shift in range(1, CLIP_RUN):
+        run &= at_top[shift : n - CLIP_RUN + 1 + shift]
+    hit = run.any(axis=1)
+    for shift in range(CLIP_RUN):
+        out[shift : shift + hit.size] |= hit
+    return out
+
+
 def prepare_inputs(
     gyr: Any,
     acc: Any,
@@ -90,18 +157,27 @@ def prepare_inputs(
     default_dt: float,
     acc_range: float | None = None,
     gyr_range: float | None = None,
+    gap_factor: float = math.inf,
 ) -> tuple[FilterInputs, RunReport]:
     """Validate a batch and build the kernels' inputs and the report (see base.py's
     module docstring for every case). ``default_dt`` [s] is used when ``dt`` is None;
-    ``acc_range`` [m/s^2] and ``gyr_range`` [rad/s] are the full-scale ranges or None.
+    ``acc_range`` [m/s^2] and ``gyr_range`` [rad/s] are the full-scale ranges or None;
+    a step longer than ``gap_factor`` nominal steps is a gap (:func:`hold_time_gaps`).
 
     A clean batch takes one numba pass (:mod:`mocapkit.imu.filters.inputs_kernel`);
     anything doubtful takes the numpy checks below, which raise or warn naming the sample.
     """
     fast = _prepare_clean(gyr, acc, mag, dt, default_dt, acc_range, gyr_range)
-    if fast is not None:
+    if fast is None:
+        fast = _prepare_checked(gyr, acc, mag, dt, default_dt, acc_range, gyr_range)
+    inputs, report = fast
+    if not math.isfinite(gap_factor) or inputs.dt.size == 0:
         return fast
-    return _prepare_checked(gyr, acc, mag, dt, default_dt, acc_range, gyr_range)
+    steps, gap, gaps = hold_time_gaps(inputs.dt, default_dt, gap_factor)
+    if not gaps:
+        return fast
+    inputs = inputs._replace(dt=np.ascontiguousarray(steps), gap=gap)
+    return inputs, dataclasses.replace(report, gaps=gaps)
 
 
 def _prepare_clean(
@@ -137,10 +213,12 @@ def _prepare_clean(
         use_acc,
         use_mag,
     )
-    if not clean:
+    if not clean or (n >= CLIP_RUN and clipped_gyr(g).any()):
         return None
     steps = np.ascontiguousarray(_dt_array(dt, n, default_dt))
-    inputs = FilterInputs(g, a, np.zeros((n, 3)) if m is None else m, steps, use_acc, use_mag)
+    no = np.zeros(n, dtype=bool)
+    mm = np.zeros((n, 3)) if m is None else m
+    inputs = FilterInputs(g, a, mm, steps, use_acc, use_mag, no, no)
     return inputs, RunReport(n, acc_rejected, mag_gaps, mag_rejected, 0)
 
 
@@ -167,20 +245,22 @@ def _prepare_checked(
     use_acc = acc_norm > MIN_VECTOR_NORM
     if acc_range is not None:
         use_acc &= ~(np.abs(a) >= _SATURATION_FRACTION * acc_range).any(axis=1)
-    gyr_saturated = 0
+    sat = clipped_gyr(g)
     if gyr_range is not None:
-        sat = (np.abs(g) >= _SATURATION_FRACTION * gyr_range).any(axis=1)
-        gyr_saturated = int(sat.sum())
-        if gyr_saturated:
-            i = int(np.flatnonzero(sat)[0])
-            warnings.warn(
-                f"gyr: saturated at sample {i} ({gyr_saturated} samples reach the "
-                f"{gyr_range:g} rad/s range); the rotation there is "
-                "underestimated and only the accelerometer/magnetometer correction "
-                "recovers it. Use a larger gyroscope range if the device has one.",
-                SensorSaturationWarning,
-                stacklevel=5,  # the caller of OrientationFilter.run
-            )
+        sat |= (np.abs(g) >= _SATURATION_FRACTION * gyr_range).any(axis=1)
+    gyr_saturated = int(sat.sum())
+    if gyr_saturated:
+        i = int(np.flatnonzero(sat)[0])
+        what = f"the {gyr_range:g} rad/s range" if gyr_range is not None else "a flat top"
+        warnings.warn(
+            f"gyr: saturated at sample {i} ({gyr_saturated} samples reach {what}, "
+            f"{float(np.abs(g[i]).max()):.4g} rad/s); the rotation there is underestimated "
+            "and the filter re-acquires its orientation after it (polaris) or only the "
+            "accelerometer/magnetometer correction recovers it. Use a larger gyroscope "
+            "range if the device has one.",
+            SensorSaturationWarning,
+            stacklevel=5,  # the caller of OrientationFilter.run
+        )
     mag_gaps = mag_rejected = 0
     if mag is None:
         m = np.zeros((n, 3))
@@ -201,6 +281,8 @@ def _prepare_checked(
         np.ascontiguousarray(steps),
         np.ascontiguousarray(use_acc),
         np.ascontiguousarray(use_mag),
+        np.zeros(n, dtype=bool),
+        np.ascontiguousarray(sat),
     )
     report = RunReport(n, int((~use_acc).sum()), mag_gaps, mag_rejected, gyr_saturated)
     return inputs, report

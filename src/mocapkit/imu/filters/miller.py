@@ -226,7 +226,7 @@ class MillerFilter(OrientationFilter):
 
     def _run_fast(self, inputs: FilterInputs) -> FloatArray:
         q = np.array(self.state.quat, dtype=np.float64)
-        out = miller_run_kernel(q, *inputs, self.params.alpha)
+        out = miller_run_kernel(q, *inputs[:6], self.params.alpha)
         self.state.quat = q  # the kernel leaves the final estimate in q
         return out
 

@@ -22,8 +22,11 @@ Design (details, equations and the measured value of each part on BROAD in
   (:mod:`mocapkit.imu.filters.polaris_offline`).
 
 Time steps: the gyroscope integration, the drift integrals and the process noises use
-each sample's ``dt`` (dropped samples are integrated over their true length); the
+each sample's ``dt`` (a few dropped samples are integrated over their true length); the
 low-pass coefficients are those of the nominal ``rate_hz``.
+
+Faults (a time gap, a saturated gyroscope): the inclination and, in 9D, the heading are
+re-acquired (:mod:`mocapkit.imu.filters.polaris_faults`).
 
 The reference implementation is :mod:`mocapkit.imu.filters.polaris_reference`, the numba
 fast path :mod:`mocapkit.imu.filters.polaris_kernels`; parameters and state in
@@ -32,6 +35,8 @@ fast path :mod:`mocapkit.imu.filters.polaris_kernels`; parameters and state in
 
 from __future__ import annotations
 
+import copy
+import itertools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,7 +48,12 @@ from mocapkit.geometry import quat_mul, quat_normalize
 from mocapkit.imu.filters import polaris_params as pp
 from mocapkit.imu.filters.base import Backend, FilterState, OrientationFilter, register_filter
 from mocapkit.imu.filters.inputs import FilterInputs
-from mocapkit.imu.filters.polaris_engine import initial_linear_acc, run_pass, start
+from mocapkit.imu.filters.polaris_engine import PassResult, initial_linear_acc, run_pass, start
+from mocapkit.imu.filters.polaris_faults import (
+    reacquire_sample,
+    restart_inclination,
+    restart_points,
+)
 from mocapkit.imu.filters.polaris_offline import OfflineResult, smooth
 from mocapkit.imu.filters.polaris_params import PolarisCore, PolarisParams
 from mocapkit.imu.filters.polaris_reference import reset_heading
@@ -62,6 +72,9 @@ class PolarisState(FilterState):
 
     quat6: FloatArray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0, 0.0]))
     core: PolarisCore = field(default_factory=PolarisCore)
+    fault_saturated: bool = False  # the last sample processed was saturated
+    reacquire_elapsed: float = -1.0  # [s] since a fault whose heading re-acquire is due
+    recoveries: int = 0  # faults recovered from since the start (gaps, saturation)
 
     @property
     def started(self) -> bool:
@@ -223,23 +236,70 @@ class Polaris(OrientationFilter):
             start(
                 self._c, core, self.state.quat, inputs.gyr[0], acc0, lin2, self.params.init_samples
             )
-        result = run_pass(
-            self._c,
-            core,
-            backend,
-            inputs.gyr,
-            inputs.acc,
-            inputs.mag,
-            inputs.dt,
-            inputs.use_acc,
-            inputs.use_mag,
-            self._mode_9d,
-        )
+        restarts = restart_points(inputs.gap, inputs.saturated, self.state.fault_saturated)
+        self.state.fault_saturated = bool(inputs.saturated[-1])
+        if restarts.size == 0 and self.state.reacquire_elapsed < 0.0:
+            result = self._pass(inputs, 0, inputs.gyr.shape[0], backend)
+        else:
+            result = self._recovering(inputs, restarts, backend)
         _check_output(result.q9)
         self.state.quat = result.q9[-1].copy()
         self.state.quat6 = result.q6[-1].copy()
         self._last_q6 = result.q6
         return result.q9
+
+    def _pass(
+        self, inputs: FilterInputs, a: int, b: int, backend: str, aux: bool = False
+    ) -> PassResult:
+        """One kernel pass over samples ``[a, b)`` from the current state."""
+        return run_pass(
+            self._c,
+            self.state.core,
+            backend,
+            inputs.gyr[a:b],
+            inputs.acc[a:b],
+            inputs.mag[a:b],
+            inputs.dt[a:b],
+            inputs.use_acc[a:b],
+            inputs.use_mag[a:b],
+            self._mode_9d,
+            aux,
+        )
+
+    def _recovering(self, inputs: FilterInputs, restarts: np.ndarray, backend: str) -> PassResult:
+        """The pass split at the fault restarts, with the heading re-acquire found per
+        sample (:mod:`mocapkit.imu.filters.polaris_faults`)."""
+        n = inputs.gyr.shape[0]
+        bounds = [0, *[int(r) for r in restarts if r > 0], n]
+        parts: list[PassResult] = []
+        state = self.state
+        for a, b in itertools.pairwise(bounds):
+            if a in restarts:
+                restart_inclination(state.core)
+                state.recoveries += 1
+                if self._mode_9d:
+                    state.reacquire_elapsed = 0.0
+            while a < b:
+                if state.reacquire_elapsed < 0.0 or not self._mode_9d:
+                    parts.append(self._pass(inputs, a, b, backend))
+                    break
+                saved = copy.deepcopy(state.core)
+                probe = self._pass(inputs, a, b, backend, aux=True)
+                k = reacquire_sample(probe.aux, inputs.dt[a:b], state.reacquire_elapsed)
+                if k < 0:
+                    state.reacquire_elapsed += float(inputs.dt[a:b].sum())
+                    parts.append(PassResult(probe.q9, probe.q6, np.zeros((0, 8))))
+                    break
+                state.core = saved
+                parts.append(self._pass(inputs, a, a + k + 1, backend))
+                reset_heading(state.core)
+                state.reacquire_elapsed = -1.0
+                a += k + 1
+        return PassResult(
+            np.concatenate([p.q9 for p in parts]),
+            np.concatenate([p.q6 for p in parts]),
+            np.zeros((0, 8)),
+        )
 
     def run_both(
         self, gyr: Any, acc: Any, mag: Any, dt: Any = None
