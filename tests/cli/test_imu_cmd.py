@@ -68,7 +68,7 @@ def test_evaluate_text_table(two_trials: Path, capsys: pytest.CaptureFixture[str
 
 def test_evaluate_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["imu", "evaluate", str(tmp_path), "--filter", "miller"]) == 1
-    assert "no .hdf5 files found" in capsys.readouterr().err
+    assert "no .hdf5 or .mat files found" in capsys.readouterr().err
     assert main(["imu", "evaluate", str(tmp_path), "--filter", "nope"]) == 2
     assert main(["imu", "evaluate", str(tmp_path), "--filter", "miller", "--param", "alpha"]) == 2
 

@@ -31,5 +31,39 @@ def test_not_a_broad_file(tmp_path: Path) -> None:
     bad.write_text("not hdf5")
     with pytest.raises(FileFormatError, match="not a readable HDF5 file"):
         read_broad_trial(bad)
-    with pytest.raises(FileFormatError, match="no .hdf5 files found"):
+    with pytest.raises(FileFormatError, match=r"no .hdf5 or .mat files found"):
         list_broad_trials(tmp_path / "..")
+    bad_mat = tmp_path / "y.mat"
+    bad_mat.write_text("not mat")
+    with pytest.raises(FileFormatError, match="not a readable MATLAB .mat file"):
+        read_broad_trial(bad_mat)
+
+
+def test_mat_trial_equals_hdf5_trial(shared_data: Path, tmp_path: Path) -> None:
+    # BROAD ships every trial as data_mat/*.mat too (some only there): the same arrays
+    import scipy.io
+
+    src = read_broad_trial(shared_data / "broad" / "24_disturbed_tapping_A.hdf5")
+    mat = tmp_path / "24_disturbed_tapping_A.mat"
+    scipy.io.savemat(
+        mat,
+        {
+            "imu_gyr": src.imu.gyr,
+            "imu_acc": src.imu.acc,
+            "imu_mag": src.imu.mag,
+            "opt_quat": src.reference.quat,
+            "opt_pos": src.position,
+            "movement": src.movement.astype(np.uint8)[:, None],
+            "sampling_rate": np.array([[src.rate_hz]]),
+        },
+    )
+    got = read_broad_trial(mat)
+    assert got.name == src.name
+    assert got.rate_hz == src.rate_hz
+    np.testing.assert_array_equal(got.imu.gyr, src.imu.gyr)
+    np.testing.assert_allclose(got.reference.quat, src.reference.quat, atol=1e-12)
+    np.testing.assert_array_equal(got.movement, src.movement)
+    assert list_broad_trials(tmp_path) == [mat]
+    scipy.io.savemat(tmp_path / "z.mat", {"imu_gyr": src.imu.gyr})
+    with pytest.raises(FileFormatError, match="missing variable"):
+        read_broad_trial(tmp_path / "z.mat")

@@ -6,4 +6,4 @@ The command line offers these as choices before any filter (numba, scipy) is loa
 
 from __future__ import annotations
 
-BUILTIN_FILTERS: tuple[str, ...] = ("bachmann", "miller", "polaris")
+BUILTIN_FILTERS: tuple[str, ...] = ("bachmann", "miller", "polaris", "polaris-body")

@@ -35,11 +35,37 @@ class BroadTrial:
         return float(self.imu.meta["sampling_rate"])
 
 
+def _read_mat(p: Path) -> dict[str, np.ndarray]:
+    """The arrays of a BROAD ``data_mat`` trial (MATLAB 5 file, same names as the HDF5)."""
+    import scipy.io
+
+    try:
+        data = scipy.io.loadmat(p)
+    except (OSError, ValueError, NotImplementedError, scipy.io.matlab.MatReadError) as exc:
+        raise FileFormatError(f"{p}: not a readable MATLAB .mat file ({exc})") from exc
+    missing = [k for k in (*_REQUIRED, "sampling_rate") if k not in data]
+    if missing:
+        raise FileFormatError(
+            f"{p}: missing variable(s) {', '.join(missing)}; is this a BROAD data_mat trial?"
+        )
+    return data
+
+
 def read_broad_trial(path: str | Path) -> BroadTrial:
-    """Read one BROAD ``.hdf5`` trial."""
+    """Read one BROAD trial: ``.hdf5`` (``data_hdf5/``) or ``.mat`` (``data_mat/``)."""
     import h5py
 
     p = Path(path)
+    if p.suffix.lower() == ".mat":
+        d = _read_mat(p)
+        return _trial(
+            p,
+            float(np.asarray(d["sampling_rate"]).reshape(-1)[0]),
+            *(np.asarray(d[k], dtype=np.float64) for k in ("imu_gyr", "imu_acc", "imu_mag")),
+            np.asarray(d["opt_quat"], dtype=np.float64),
+            np.asarray(d["movement"]).astype(bool).reshape(-1),
+            np.asarray(d["opt_pos"], dtype=np.float64) if "opt_pos" in d else None,
+        )
     try:
         f = h5py.File(p, "r")
     except OSError as exc:
@@ -58,11 +84,22 @@ def read_broad_trial(path: str | Path) -> BroadTrial:
         mag = np.asarray(f["imu_mag"], dtype=np.float64)
         quat = np.asarray(f["opt_quat"], dtype=np.float64)
         movement = np.asarray(f["movement"], dtype=bool).reshape(-1)
-        pos = (
-            np.asarray(f["opt_pos"], dtype=np.float64)
-            if "opt_pos" in f
-            else np.full((len(gyr), 3), np.nan)
-        )
+        pos = np.asarray(f["opt_pos"], dtype=np.float64) if "opt_pos" in f else None
+    return _trial(p, rate, gyr, acc, mag, quat, movement, pos)
+
+
+def _trial(
+    p: Path,
+    rate: float,
+    gyr: np.ndarray,
+    acc: np.ndarray,
+    mag: np.ndarray,
+    quat: np.ndarray,
+    movement: np.ndarray,
+    pos: np.ndarray | None,
+) -> BroadTrial:
+    if pos is None:
+        pos = np.full((len(gyr), 3), np.nan)
     name = p.stem
     time = np.arange(len(gyr)) / rate
     imu = ImuRecording(
@@ -75,13 +112,18 @@ def read_broad_trial(path: str | Path) -> BroadTrial:
 
 
 def list_broad_trials(directory: str | Path) -> list[Path]:
-    """The ``*.hdf5`` trials in a directory, sorted by name."""
+    """The ``*.hdf5`` and ``*.mat`` trials in a directory, sorted by name (a trial in both
+    formats is listed once, as ``.hdf5``)."""
     d = Path(directory)
     if not d.is_dir():
-        raise FileFormatError(f"{d}: not a directory of BROAD .hdf5 trials")
-    files = sorted(d.glob("*.hdf5"))
+        raise FileFormatError(f"{d}: not a directory of BROAD .hdf5 or .mat trials")
+    hdf5 = {f.stem: f for f in d.glob("*.hdf5")}
+    mat = {f.stem: f for f in d.glob("*.mat") if f.stem not in hdf5}
+    files = sorted([*hdf5.values(), *mat.values()], key=lambda f: f.name)
     if not files:
-        raise FileFormatError(f"{d}: no .hdf5 files found (expected BROAD's data_hdf5 trials)")
+        raise FileFormatError(
+            f"{d}: no .hdf5 or .mat files found (expected BROAD's data_hdf5 or data_mat trials)"
+        )
     return files
 
 

@@ -342,3 +342,10 @@ class Polaris(OrientationFilter):
         )
         _check_output(result.q6 if result.q9 is None else result.q9)
         return result
+
+
+@register_filter("polaris-body")
+def polaris_body(rate_hz: float, backend: Backend = "fast", **gains: Any) -> Polaris:
+    """``polaris`` with :data:`~mocapkit.imu.filters.polaris_params.BODY_PROFILE` (sensors
+    worn on limbs; keywords override it). The default of the suit, teleop and demo."""
+    return Polaris(rate_hz=rate_hz, backend=backend, **{**pp.BODY_PROFILE, **gains})
