@@ -73,6 +73,11 @@ def register(sub: Any) -> None:
         action="store_true",
         help="subtract the gyroscope bias measured over each trial's first rest period",
     )
+    ev.add_argument(
+        "--offline",
+        action="store_true",
+        help="the filter's offline mode (forward-backward over the whole trial; polaris)",
+    )
     ev.add_argument("--json", action="store_true", help="print one JSON object")
     ev.set_defaults(func=_evaluate)
 
@@ -95,6 +100,11 @@ def register(sub: Any) -> None:
     run.add_argument("--sensor", action="append", default=[], help="only this sensor")
     run.add_argument("--param", type=_param, action="append", default=[], metavar="NAME=VALUE")
     run.add_argument("--remove-gyr-bias", action="store_true")
+    run.add_argument(
+        "--offline",
+        action="store_true",
+        help="the filter's offline mode (forward-backward over the whole recording; polaris)",
+    )
     run.set_defaults(func=_run)
 
     cal = cmds.add_parser(
@@ -142,6 +152,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         args.mode,
         args.backend,
         prepare=_bias_remover(args.remove_gyr_bias),
+        offline=args.offline,
         **dict(args.param),
     )
     if args.json:
@@ -149,7 +160,8 @@ def _evaluate(args: argparse.Namespace) -> int:
         return EXIT_OK
     out = sys.stdout
     aligned = " (heading-aligned total)" if args.mode == "6d" else ""
-    out.write(f"filter {args.filter_name}, {args.mode}{aligned}, backend {args.backend}\n")
+    how = "offline" if args.offline else "online"
+    out.write(f"filter {args.filter_name} ({how}), {args.mode}{aligned}, backend {args.backend}\n")
     out.write(f"{'trial':40s} {'total':>8s} {'heading':>8s} {'incl.':>8s}  [deg]\n")
     for t in result.trials:
         d = t.errors.as_degrees()
@@ -177,6 +189,7 @@ def _select(items: dict[str, Any], wanted: list[str], path: Path) -> dict[str, A
 
 
 def _run(args: argparse.Namespace) -> int:
+    from mocapkit.imu.evaluation import check_offline
     from mocapkit.imu.filters import make_filter
     from mocapkit.imu.resample import common_time_base, resample_orientation
     from mocapkit.io.imu_files import read_device_orientations, read_imu_recordings
@@ -192,6 +205,13 @@ def _run(args: argparse.Namespace) -> int:
         for name, rec in progress(list(recs.items()), args.filter_name, total=len(recs)):
             rec = prepare(rec) if prepare else rec
             filt = make_filter(args.filter_name, rec.rate_hz, **dict(args.param))
+            if args.offline:
+                mag = rec.mag if args.mode == "9d" else None
+                q = check_offline(filt, args.filter_name).run_offline(
+                    rec.gyr, rec.acc, mag, dt=_steps(rec, filt.params.dt)
+                )
+                series[name] = OrientationSeries(rec.time, q, name=rec.name)
+                continue
             series[name] = filt.run_recording(rec, use_mag=args.mode == "9d")
             report = filt.last_report
             if report.mag_gaps or report.acc_rejected or report.mag_rejected:
@@ -216,6 +236,13 @@ def _run(args: argparse.Namespace) -> int:
     write_table(args.output, time - time[0], labels, quats, name=args.path.stem)
     print(f"wrote {args.output} ({len(time)} rows, sensors: {', '.join(labels)})", file=sys.stderr)
     return EXIT_OK
+
+
+def _steps(rec: Any, nominal: float) -> Any:
+    """Per-sample time steps of a recording (the first one nominal), as ``run_recording``."""
+    if rec.n_samples < 2:
+        return None
+    return np.concatenate([[nominal], np.diff(rec.time)])
 
 
 def _calibrate_mag(args: argparse.Namespace) -> int:

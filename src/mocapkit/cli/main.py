@@ -7,6 +7,7 @@ import importlib
 import logging
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 from mocapkit import __version__
 from mocapkit.cli.common import (
@@ -120,6 +121,33 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_INTERRUPTED
 
 
+def _one_line_warnings() -> None:
+    """Warnings (a time gap, a saturated gyroscope...) as one line a user reads, not the
+    source line that raised them."""
+    import warnings
+
+    def show(message: Any, category: Any, filename: Any, lineno: Any, file: Any = None,
+             line: Any = None) -> None:  # fmt: skip
+        print(f"mocapkit: warning: {message}", file=sys.stderr)
+
+    warnings.showwarning = show
+
+
+def _stop_signals_interrupt() -> None:
+    """SIGTERM (a service stop, ``timeout``, ``kill``) and SIGHUP (a closed terminal) stop
+    a command like Ctrl-C: its ``finally`` blocks close the recordings and sockets, so an
+    MCAP file is finished, not left without its summary."""
+    import signal
+
+    def interrupt(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    for name in ("SIGTERM", "SIGHUP"):
+        sig = getattr(signal, name, None)
+        if sig is not None:
+            signal.signal(sig, interrupt)
+
+
 def run() -> None:
     """Console-script entry point.
 
@@ -131,6 +159,8 @@ def run() -> None:
     import contextlib
     import os
 
+    _one_line_warnings()
+    _stop_signals_interrupt()
     code = main()
     logging.shutdown()
     atexit._run_exitfuncs()

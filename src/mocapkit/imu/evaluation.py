@@ -78,21 +78,38 @@ def evaluate_trial(
     mode: Mode = "9d",
     backend: Backend = "fast",
     prepare: Callable[[BroadTrial], Any] | None = None,
+    offline: bool = False,
     **params: Any,
 ) -> tuple[TrialResult, np.ndarray]:
     """Run filter ``name`` on one trial; returns the result and the (N, 4) estimates.
 
-    ``prepare`` may return a modified ``ImuRecording`` (e.g. gyroscope bias removed).
+    ``prepare`` may return a modified ``ImuRecording`` (e.g. gyroscope bias removed);
+    ``offline`` uses the filter's forward-backward mode (:func:`check_offline`).
     """
     mode = _check_mode(mode)
     imu = prepare(trial) if prepare is not None else trial.imu
     filt = make_filter(name, trial.rate_hz, backend, **params)
     mag = imu.mag if mode == "9d" else None
     start = time.perf_counter()
-    q = filt.run(imu.gyr, imu.acc, mag)
+    q = (
+        check_offline(filt, name).run_offline(imu.gyr, imu.acc, mag)
+        if offline
+        else filt.run(imu.gyr, imu.acc, mag)
+    )
     seconds = time.perf_counter() - start
     errors = orientation_rmse(q, trial.reference.quat, trial.movement, align_heading=mode == "6d")
     return TrialResult(trial.name, errors, imu.n_samples, seconds), q
+
+
+def check_offline(filt: Any, name: str) -> Any:
+    """``filt`` if it has an offline (forward-backward) mode, else a ConfigError naming
+    the filters that do."""
+    if not callable(getattr(filt, "run_offline", None)):
+        raise ConfigError(
+            f"--offline: filter {name!r} has no offline mode; use polaris or polaris-body "
+            "(forward-backward smoothing), or drop --offline"
+        )
+    return filt
 
 
 def warm_up(name: str, backend: Backend = "fast", **params: Any) -> None:
@@ -110,12 +127,17 @@ def evaluate(
     mode: Mode = "9d",
     backend: Backend = "fast",
     prepare: Callable[[BroadTrial], Any] | None = None,
+    offline: bool = False,
     **params: Any,
 ) -> EvaluationResult:
     """Evaluate filter ``name`` on every trial (see the module docstring)."""
     mode = _check_mode(mode)
+    if offline:
+        check_offline(make_filter(name, 100.0, backend, **params), name)
     warm_up(name, backend, **params)
-    results = [evaluate_trial(t, name, mode, backend, prepare, **params)[0] for t in trials]
+    results = [
+        evaluate_trial(t, name, mode, backend, prepare, offline, **params)[0] for t in trials
+    ]
     if not results:
         raise ConfigError("trials: nothing to evaluate")
     return EvaluationResult(name, mode, results, dict(params))

@@ -61,7 +61,9 @@ def read_broad_trial(path: str | Path) -> BroadTrial:
         return _trial(
             p,
             float(np.asarray(d["sampling_rate"]).reshape(-1)[0]),
-            *(np.asarray(d[k], dtype=np.float64) for k in ("imu_gyr", "imu_acc", "imu_mag")),
+            np.asarray(d["imu_gyr"], dtype=np.float64),
+            np.asarray(d["imu_acc"], dtype=np.float64),
+            np.asarray(d["imu_mag"], dtype=np.float64),
             np.asarray(d["opt_quat"], dtype=np.float64),
             np.asarray(d["movement"]).astype(bool).reshape(-1),
             np.asarray(d["opt_pos"], dtype=np.float64) if "opt_pos" in d else None,

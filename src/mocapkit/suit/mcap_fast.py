@@ -144,9 +144,10 @@ def _scan_chunk(raw: bytes, wanted: np.ndarray, parts: list[Any], path: Path) ->
 def read_frame_buffer(path: str | Path, topic: str = "/suit/packets") -> FrameBuffer:
     """Every frame on ``topic`` of an MCAP recording, fast (see the module docstring)."""
     from mcap.exceptions import McapError
-    from mcap.reader import make_reader
     from mcap.records import Chunk, Message
     from mcap.stream_reader import StreamReader
+
+    from mocapkit.io.mcap_recovery import iter_messages, summary_or_none
 
     p = Path(path)
     if not p.is_file():
@@ -156,9 +157,12 @@ def read_frame_buffer(path: str | Path, topic: str = "/suit/packets") -> FrameBu
     loose: list[tuple[bytes, int, int]] = []
     try:
         with open(p, "rb") as f:
-            summary = make_reader(f).get_summary()
-            if summary is None:
-                raise FileFormatError(f"{p}: no summary section (was the recording closed?)")
+            summary = summary_or_none(f)
+            if summary is None:  # never closed: read record by record (with a warning)
+                f.seek(0)
+                for _channel, rec in iter_messages(f, p, [topic]):
+                    loose.append((rec.data, rec.log_time, rec.sequence))
+                return _assemble(parts, loose)
             for cid, ch in summary.channels.items():
                 if ch.topic == topic:
                     wanted[cid] = True
@@ -182,6 +186,12 @@ def read_frame_buffer(path: str | Path, topic: str = "/suit/packets") -> FrameBu
                         loose.append((rec.data, rec.log_time, rec.sequence))
     except (McapError, ValueError, EOFError) as exc:
         raise FileFormatError(f"{p}: not a readable MCAP recording ({exc})") from exc
+    return _assemble(parts, loose)
+
+
+def _assemble(parts: list[Any], loose: list[tuple[bytes, int, int]]) -> FrameBuffer:
+    """One buffer of frames in (log time, sequence) order from scanned chunks and loose
+    messages."""
     total = sum(int(length.sum()) for _, _, length, _, _ in parts) + sum(
         len(d) for d, _, _ in loose
     )

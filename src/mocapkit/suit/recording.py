@@ -183,9 +183,21 @@ class McapRecorder:
             self._queue.put((1, sample, sample.t_arrival_ns, None))
 
     def _loop(self) -> None:
+        """Write the queue; close a chunk at least every ``FLUSH_S`` (crash safety: after
+        a SIGKILL everything but the last moments is readable, see ``mcap_recovery``)."""
+        from mocapkit.io.mcap_recovery import FLUSH_S
+
         add = self._writer.add_message
+        last_flush = time.monotonic()
         while True:
-            item = self._queue.get()
+            now = time.monotonic()
+            if now - last_flush >= FLUSH_S:
+                self._writer.flush()
+                last_flush = now
+            try:
+                item = self._queue.get(timeout=FLUSH_S)
+            except queue.Empty:
+                continue
             if item is None:
                 return
             what, payload, t_ns, source = item
@@ -233,9 +245,11 @@ class RecordedFrame:
 
 
 def read_frames(path: str | Path) -> list[RecordedFrame]:
-    """All ``/suit/packets`` frames of a recording, in arrival order."""
+    """All ``/suit/packets`` frames of a recording, in arrival order (a recording that was
+    never closed: up to its last complete record, with a warning)."""
     from mcap.exceptions import McapError
-    from mcap.reader import make_reader
+
+    from mocapkit.io.mcap_recovery import iter_messages
 
     p = Path(path)
     if not p.is_file():
@@ -243,8 +257,7 @@ def read_frames(path: str | Path) -> list[RecordedFrame]:
     rows: list[tuple[int, int, RecordedFrame]] = []
     try:
         with open(p, "rb") as f:
-            reader = make_reader(f)
-            for _, channel, msg in reader.iter_messages(topics=[PACKETS_TOPIC]):
+            for channel, msg in iter_messages(f, p, [PACKETS_TOPIC]):
                 if channel.message_encoding != FRAME_ENCODING:
                     continue
                 frame = RecordedFrame(msg.data, msg.log_time, channel.metadata.get("source", ""))
@@ -257,10 +270,10 @@ def read_frames(path: str | Path) -> list[RecordedFrame]:
 
 def read_samples(path: str | Path) -> list[dict[str, Any]]:
     """The decoded ``/suit/samples`` messages of a recording (JSON objects)."""
-    from mcap.reader import make_reader
+    from mocapkit.io.mcap_recovery import iter_messages
 
     with open(path, "rb") as f:
-        return [json.loads(m.data) for _, _, m in make_reader(f).iter_messages([SAMPLES_TOPIC])]
+        return [json.loads(m.data) for _, m in iter_messages(f, path, [SAMPLES_TOPIC])]
 
 
 def decode_recording(path: str | Path) -> DecodedStream:

@@ -22,6 +22,7 @@ from __future__ import annotations
 import json
 import queue
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -84,6 +85,7 @@ class TeleopRecorder:
             "joints": self._w.register_channel("/teleop/joints", "json", joints),
             "transition": self._w.register_channel("/teleop/transition", "json", tr),
         }
+        self._last_flush = time.monotonic()
         self._queue: queue.SimpleQueue[tuple[str, float, dict[str, Any]] | None] | None = None
         self._thread: threading.Thread | None = None
         if threaded:
@@ -92,13 +94,32 @@ class TeleopRecorder:
             self._thread.start()
 
     def _drain(self) -> None:
+        from mocapkit.io.mcap_recovery import FLUSH_S
+
         assert self._queue is not None
-        while (item := self._queue.get()) is not None:
+        while True:
+            try:
+                item = self._queue.get(timeout=FLUSH_S)
+            except queue.Empty:
+                self._maybe_flush()
+                continue
+            if item is None:
+                return
             self._encode(*item)
+
+    def _maybe_flush(self) -> None:
+        """Close a chunk at least every ``FLUSH_S`` (crash safety, see ``mcap_recovery``)."""
+        from mocapkit.io.mcap_recovery import FLUSH_S
+
+        now = time.monotonic()
+        if now - self._last_flush >= FLUSH_S:
+            self._w.flush()
+            self._last_flush = now
 
     def _encode(self, channel: str, t: float, msg: dict[str, Any]) -> None:
         ns = max(0, int(t * 1e9))
         self._w.add_message(self._ch[channel], ns, json.dumps(msg).encode(), ns)
+        self._maybe_flush()
 
     def _write(self, channel: str, t: float, msg: dict[str, Any]) -> None:
         if self._queue is not None:
@@ -152,13 +173,14 @@ class Trajectory:
 
 
 def read_messages(path: str | Path, topic: str) -> list[dict[str, Any]]:
-    """Every JSON message on ``topic`` (e.g. ``/teleop/report``), in log order."""
-    from mcap.reader import make_reader
+    """Every JSON message on ``topic`` (e.g. ``/teleop/report``), in log order (a recording
+    that was never closed: up to its last complete record, with a warning)."""
+    from mocapkit.io.mcap_recovery import iter_messages
 
     out: list[dict[str, Any]] = []
     try:
         with open(path, "rb") as f:
-            for _schema, _channel, message in make_reader(f).iter_messages(topics=[topic]):
+            for _channel, message in iter_messages(f, path, [topic]):
                 out.append(json.loads(message.data))
     except (ValueError, KeyError, json.JSONDecodeError) as exc:
         raise FileFormatError(f"{path}: not a mocapkit teleop MCAP recording ({exc})") from exc
