@@ -10,6 +10,12 @@ from collections.abc import Sequence
 from typing import Any
 
 from mocapkit import __version__
+from mocapkit.cli.boundary import (
+    REPORT_URL,
+    check_outputs_are_not_inputs,
+    describe_decode_error,
+    describe_os_error,
+)
 from mocapkit.cli.common import (
     EXIT_ERROR,
     EXIT_INTERRUPTED,
@@ -106,6 +112,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         return EXIT_OK if args.command is None else EXIT_ERROR
     try:
+        check_outputs_are_not_inputs(args)
         return int(args.func(args) or EXIT_OK)
     except MissingDependencyError as exc:
         print(f"mocapkit: {exc}", file=sys.stderr)
@@ -113,12 +120,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MocapkitError as exc:
         print(f"mocapkit: error: {exc}", file=sys.stderr)
         return EXIT_ERROR
-    except FileNotFoundError as exc:
-        print(f"mocapkit: error: {exc}", file=sys.stderr)
-        return EXIT_ERROR
     except KeyboardInterrupt:
         print("mocapkit: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except OSError as exc:  # disk full, permissions, a directory, a port in use...
+        print(f"mocapkit: error: {describe_os_error(exc)}", file=sys.stderr)
+        return EXIT_ERROR
+    except Exception as exc:  # the boundary: decode errors, else a bug
+        decoded = describe_decode_error(exc)
+        if decoded is not None:
+            print(f"mocapkit: error: {decoded}", file=sys.stderr)
+            return EXIT_ERROR
+        if args.verbose:
+            import traceback
+
+            traceback.print_exc()
+        print(
+            f"mocapkit: internal error ({type(exc).__name__}: {exc}). This is a bug in "
+            f"mocapkit {__version__}; please report it with the command line at "
+            f"{REPORT_URL} (add -v for the traceback)",
+            file=sys.stderr,
+        )
+        return EXIT_ERROR
 
 
 def _one_line_warnings() -> None:

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from mocapkit.cli.boundary import port
 from mocapkit.cli.common import EXIT_OK, print_json
 
 _EPILOG = """\
@@ -41,7 +42,7 @@ def register(sub: Any) -> None:
         "simulate", help="stream a simulated suit", epilog=_EPILOG, formatter_class=fmt
     )
     s.add_argument("--host", default="127.0.0.1")
-    s.add_argument("--port", type=int, default=9000, help="UDP port of the receiver")
+    s.add_argument("--port", type=port, default=9000, help="UDP port of the receiver")
     s.add_argument("--serial-port", help="send over this serial device instead of UDP")
     s.add_argument("--baud", type=int, default=921_600, help="serial line speed [bit/s]")
     s.add_argument("--sensors", type=int, default=15, help="number of sensors, 1..15")
@@ -77,7 +78,7 @@ def register(sub: Any) -> None:
     ):
         r = ss.add_parser(name, help=helptext, epilog=_EPILOG, formatter_class=fmt)
         r.add_argument("--host", default="0.0.0.0")
-        r.add_argument("--port", type=int, default=9000)
+        r.add_argument("--port", type=port, default=9000)
         r.add_argument("--serial-port", help="receive from this serial device instead of UDP")
         r.add_argument("--baud", type=int, default=921_600, help="serial line speed [bit/s]")
         r.add_argument("--seconds", type=float, help="stop after this long (default: Ctrl-C)")
@@ -101,7 +102,7 @@ def register(sub: Any) -> None:
     )
     rp.add_argument("recording")
     rp.add_argument("--host", default="127.0.0.1")
-    rp.add_argument("--port", type=int, default=9000)
+    rp.add_argument("--port", type=port, default=9000)
     rp.add_argument("--speed", type=float, default=1.0, help="1 real time, 0 as fast as possible")
     rp.add_argument("--json", action="store_true")
     rp.set_defaults(func=_replay)

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from mocapkit.cli.boundary import port
 from mocapkit.cli.common import EXIT_OK, print_json, progress
 
 _EXAMPLES = """\
@@ -93,7 +94,7 @@ def register(sub: Any) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     rn.add_argument("--suit-host", default="127.0.0.1", help="address to receive the suit on")
-    rn.add_argument("--suit-port", type=int, default=9000, help="UDP port of the suit stream")
+    rn.add_argument("--suit-port", type=port, default=9000, help="UDP port of the suit stream")
     rn.add_argument(
         "--server", default=None, help="robot server HOST:PORT (default: start one here)"
     )
@@ -101,7 +102,7 @@ def register(sub: Any) -> None:
     rn.add_argument(
         "--commands", default="", help="scheduled commands, e.g. '1.0:calibrate,3.5:engage'"
     )
-    rn.add_argument("--control-port", type=int, default=None, help="UDP control socket port")
+    rn.add_argument("--control-port", type=port, default=None, help="UDP control socket port")
     rn.add_argument("--keys", action="store_true", help="read commands from stdin lines")
     rn.add_argument("--record", type=Path, default=None, help="record the session (MCAP)")
     rn.add_argument("--calibrate-seconds", type=float, default=1.0, help="calibration hold")
@@ -137,10 +138,12 @@ def register(sub: Any) -> None:
 def _address(text: str) -> tuple[str, int]:
     from mocapkit.errors import ConfigError
 
-    host, _, port = text.rpartition(":")
-    if not port.isdigit():
-        raise ConfigError(f"server: expected HOST:PORT like 127.0.0.1:9870, got {text!r}")
-    return (host or "127.0.0.1", int(port))
+    host, _, number = text.rpartition(":")
+    if not number.isdigit() or not 0 < int(number) <= 65535:
+        raise ConfigError(
+            f"server: expected HOST:PORT like 127.0.0.1:9870 (port 1..65535), got {text!r}"
+        )
+    return (host or "127.0.0.1", int(number))
 
 
 def _pipeline_config(args: argparse.Namespace, fusion: str) -> Any:

@@ -6,6 +6,7 @@ import argparse
 import sys
 from typing import Any
 
+from mocapkit.cli.boundary import port
 from mocapkit.cli.common import EXIT_OK, print_json
 
 _EXAMPLES = """\
@@ -33,7 +34,7 @@ def register(sub: Any) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--host", default="127.0.0.1", help="address to serve on")
-    p.add_argument("--port", type=int, default=8080, help="port (the next free one if busy)")
+    p.add_argument("--port", type=port, default=8080, help="port (the next free one if busy)")
     p.add_argument("--seconds", type=float, default=None, help="stop after this long")
     p.add_argument(
         "--shapes",
@@ -47,12 +48,30 @@ def register(sub: Any) -> None:
     p.set_defaults(func=_viewer)
 
 
+def _check_address(host: str) -> None:
+    """Bind a TCP socket to ``host`` (any port) and close it: an address that is not on
+    this machine raises OSError here, at once, instead of a server that never starts."""
+    import socket
+
+    try:
+        infos = socket.getaddrinfo(host, 0, type=socket.SOCK_STREAM)
+    except socket.gaierror as exc:
+        raise OSError(exc.errno, f"cannot resolve host {host!r}", host) from exc
+    family, kind, proto, _, address = infos[0]
+    with socket.socket(family, kind, proto) as s:
+        try:
+            s.bind(address)
+        except OSError as exc:
+            raise OSError(exc.errno, exc.strerror, f"--host {host}") from exc
+
+
 def _viewer(args: argparse.Namespace) -> int:
     from mocapkit.teleop.simulated import SimulatedConfig, SimulatedSession
     from mocapkit.viz.live_api import LiveSnapshot
     from mocapkit.viz.viewer import TeleopViewer, import_viser
 
     import_viser()  # fail early, with the install hint, before starting anything
+    _check_address(args.host)  # ... and on an address this machine does not have
     shapes = tuple(s.strip() for s in args.shapes.split(",") if s.strip())
     cfg = SimulatedConfig(
         shapes=shapes,

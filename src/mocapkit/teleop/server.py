@@ -275,7 +275,9 @@ def config_args(parser: argparse.ArgumentParser) -> None:
     """Add the server's options to a parser (shared with ``mocapkit teleop server``)."""
     d = ServerConfig()
     parser.add_argument("--host", default="127.0.0.1", help="bind address (default loopback)")
-    parser.add_argument("--port", type=int, default=9870, help="UDP port (0: any free port)")
+    from mocapkit.cli.boundary import port
+
+    parser.add_argument("--port", type=port, default=9870, help="UDP port (0: any free port)")
     parser.add_argument("--robot", default=d.robot, help="robot arm name")
     parser.add_argument("--rate-hz", type=float, default=d.rate_hz)
     parser.add_argument("--report-hz", type=float, default=d.report_hz)
