@@ -115,7 +115,12 @@ def test_nan_model_pose_holds():
 
 
 def test_workspace_and_speed_limits():
-    cfg = SessionConfig(mode="absolute", workspace_max=(0.55, 1.0, 0.7), max_speed_m_s=0.5)
+    cfg = SessionConfig(
+        mode="absolute",
+        workspace_max=(0.55, 1.0, 0.7),
+        max_speed_m_s=0.5,
+        max_model_speed_m_s=100.0,  # the 0.4 m step in 10 ms below is not a glitch here
+    )
     s = TeleopSession(cfg)
     s.engage(0.0)
     s.tick(0.0, _T(0.5), _T(0.5), 0.0)

@@ -14,12 +14,24 @@ per line or datagram, case-insensitive):
 =============================  ==============================================
 
 The control socket answers every datagram with one JSON object (``{"ok": true, ...}`` or
-``{"ok": false, "error": ...}``; ``status`` returns the snapshot) to its sender; it binds to
-loopback by default: it steers a robot.
+``{"ok": false, "error": ...}``; ``status`` returns the snapshot) to its sender. It steers
+a robot, so:
+
+- it binds to loopback by default; on any other address it needs a shared ``key``, and
+  then every datagram is ``SEQ COMMAND`` followed by a newline and the hex HMAC-SHA256 of
+  ``SEQ COMMAND`` under the key, with ``SEQ`` increasing (a replayed or forged datagram is
+  refused and logged);
+- the first sender whose datagram is accepted is the paired controller; datagrams from
+  any other address are refused;
+- an empty datagram is refused (on the keyboard a bare Enter toggles the clutch; on a
+  network, one stray empty packet must not).
 """
 
 from __future__ import annotations
 
+import hashlib
+import hmac
+import ipaddress
 import json
 import logging
 import socket
@@ -97,8 +109,19 @@ class Controls:
 class ControlSocket:
     """A UDP control socket on ``host:port`` served by a thread; use as a context manager."""
 
-    def __init__(self, controls: Controls, host: str = "127.0.0.1", port: int = 0) -> None:
+    def __init__(
+        self, controls: Controls, host: str = "127.0.0.1", port: int = 0, key: bytes | None = None
+    ) -> None:
+        if key is None and not _is_loopback(host):
+            raise ConfigError(
+                f"control host {host}: the control socket steers a robot; off loopback it "
+                "needs a shared key (signed datagrams), or bind it to 127.0.0.1"
+            )
         self.controls = controls
+        self.key = key
+        self.peer: tuple[str, int] | None = None
+        self._last_seq = -1
+        self.refused = 0
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             self.sock.bind((host, port))
@@ -118,11 +141,39 @@ class ControlSocket:
                 continue
             except OSError:
                 return
-            reply = self.controls.apply(data.decode("utf-8", "replace"))
+            text, why = self._accept(data, addr)
+            if why is not None:
+                self.refused += 1
+                log.warning("control datagram from %s refused: %s", addr, why)
+                reply: dict[str, Any] = {"ok": False, "error": why}
+            else:
+                reply = self.controls.apply(text)
             try:
                 self.sock.sendto(json.dumps(reply).encode(), addr)
             except OSError as exc:
                 log.debug("control reply to %s failed: %s", addr, exc)
+
+    def _accept(self, data: bytes, addr: tuple[str, int]) -> tuple[str, str | None]:
+        """The command of a datagram, or why it is refused."""
+        if self.peer is not None and addr != self.peer:
+            return "", f"not the paired controller ({self.peer[0]}:{self.peer[1]})"
+        try:
+            text = data.decode("utf-8")
+        except UnicodeDecodeError:
+            return "", "not UTF-8 text"
+        if self.key is not None:
+            body, _, mac = text.rpartition("\n")
+            expected = hmac.new(self.key, body.encode(), hashlib.sha256).hexdigest()
+            if not hmac.compare_digest(mac.strip(), expected):
+                return "", "bad signature (HMAC-SHA256 of 'SEQ COMMAND' under the shared key)"
+            seq_text, _, text = body.partition(" ")
+            if not seq_text.isdigit() or int(seq_text) <= self._last_seq:
+                return "", f"sequence {seq_text!r} not above {self._last_seq} (a replay?)"
+            self._last_seq = int(seq_text)
+        if not text.strip():
+            return "", "empty command (send 'clutch' to toggle the clutch)"
+        self.peer = addr
+        return text, None
 
     def start(self) -> ControlSocket:
         self._thread.start()
@@ -139,6 +190,19 @@ class ControlSocket:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+def _is_loopback(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return host == "localhost"
+
+
+def sign(key: bytes, seq: int, command: str) -> bytes:
+    """A signed control datagram (see the module docstring)."""
+    body = f"{seq} {command}"
+    return f"{body}\n{hmac.new(key, body.encode(), hashlib.sha256).hexdigest()}".encode()
 
 
 def read_keys(controls: Controls, stream: IO[str], stop: threading.Event) -> None:

@@ -87,6 +87,10 @@ class PipelineConfig:
         still_start_s: host-side fusion: the first seconds of each sensor are a still start
             (gyroscope bias and orientation, :mod:`mocapkit.imu.still_start`); 0: off.
         stale_after_s: a sensor without a valid sample this long holds the session.
+        max_sensor_rate_rad_s: a sensor's orientation turning faster than this between two
+            of its samples (by their sensor time) is a glitch, not a limb (a gyroscope's
+            range, 2000 deg/s, is above any human motion): the session holds and
+            re-engages only after reindexing, so the robot never chases the jump.
         pose: the calibration pose (``npose``: the paper's initialisation posture).
         heading_axis: the root sensor's axis that points forward in the pose (the body's
             heading at calibration), or None to use ``heading_rad``.
@@ -106,6 +110,7 @@ class PipelineConfig:
     use_mag: bool = True
     still_start_s: float = 0.8
     stale_after_s: float = 0.1
+    max_sensor_rate_rad_s: float = math.radians(2000.0)
     pose: str = "npose"
     heading_axis: str | None = "x"
     heading_rad: float = 0.0
@@ -202,6 +207,8 @@ class TeleopPipeline:
         self.t_sample = np.full(n_s, np.nan)
         """(S,) sensor time of each sensor's latest valid sample [s]."""
         self.bad: dict[int, str] = {}
+        self._clock_note: dict[int, str] = {}  # slot -> its clock stood still or went back
+        self.sensor_jumps = 0  # samples held as a jump faster than any limb
         make_filter(c.filter_name, c.rate_hz)  # fail early on a bad name
         self.fusion: FilterBank | None = (
             FilterBank(c.filter_name, c.rate_hz, n_s, c.still_start_s, c.use_mag, self._label)
@@ -379,9 +386,25 @@ class TeleopPipeline:
                 q = s.quat
             if q is None:
                 continue
+            previous = self.t_sample[slot]
+            if previous == previous and not s.t_sensor_s > previous:  # NaN: no sample yet
+                if s.t_sensor_s < previous:
+                    # ran backwards (a reset?): hold now (the session reindexes before it
+                    # follows again) and follow the new clock from here
+                    self.t_sample[slot] = s.t_sensor_s
+                    self.bad[slot] = (
+                        f"{self._label[slot]}: sensor clock ran backwards ({previous:.3f} -> "
+                        f"{s.t_sensor_s:.3f} s)"
+                    )
+                else:  # stands still: not fresh; the watchdog holds after stale_after_s
+                    self._clock_note[slot] = (
+                        f"{self._label[slot]}: sensor clock stands still at {previous:.3f} s"
+                    )
+                continue
+            self._clock_note.pop(slot, None)
             w, x, y, z = float(q[0]), float(q[1]), float(q[2]), float(q[3])
             n2 = w * w + x * x + y * y + z * z
-            if not (abs(n2 - 1.0) < 0.1):  # also False for NaN
+            if not (abs(n2 - 1.0) < 0.01):  # also False for NaN; the wire gives 1 +- 1e-4
                 self.bad[slot] = (
                     f"{self._label[slot]}: invalid orientation [{w:.3g}, {x:.3g}, {y:.3g}, {z:.3g}]"
                 )
@@ -389,6 +412,18 @@ class TeleopPipeline:
             if slot in self.bad:
                 del self.bad[slot]
             qs = self.q_sensor[slot]
+            if previous == previous:  # a glitch: faster than any limb since the last sample
+                dot = abs(w * qs[0] + x * qs[1] + y * qs[2] + z * qs[3]) / math.sqrt(n2)
+                turn = 2.0 * math.acos(min(1.0, dot))
+                step = max(s.t_sensor_s - previous, 1e-3)
+                if turn > self.config.max_sensor_rate_rad_s * step:
+                    self.bad[slot] = (
+                        f"{self._label[slot]}: turned {math.degrees(turn):.0f} deg in "
+                        f"{step * 1e3:.0f} ms (over "
+                        f"{math.degrees(self.config.max_sensor_rate_rad_s):.0f} deg/s): a "
+                        "glitch? held; re-engages after reindexing"
+                    )
+                    self.sensor_jumps += 1
             qs[0], qs[1], qs[2], qs[3] = w, x, y, z
             self.t_valid[slot] = now
             self.t_sample[slot] = s.t_sensor_s
@@ -412,6 +447,8 @@ class TeleopPipeline:
         if stale[worst] > self.config.stale_after_s:
             if not np.isfinite(stale[worst]):
                 return f"{self._label[worst]}: no data yet"
+            if worst in self._clock_note:
+                return f"{self._clock_note[worst]}: no fresh sample for {stale[worst]:.2f} s"
             return f"{self._label[worst]}: no data for {stale[worst]:.2f} s (dropout?)"
         return None
 

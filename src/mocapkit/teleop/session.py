@@ -54,6 +54,11 @@ class SessionConfig:
         unreachable_follow_m: while the server reports the target out of reach, stay
             engaged (the robot holds its closest pose and follows again when the target
             comes back) as long as it is at most this far [m]; beyond, disengage.
+        max_model_rate_rad_s, max_model_speed_m_s: the operator's model pose moving faster
+            than this between two ticks is a glitch (a bad packet, a sensor jump), not a
+            human: the session holds with the reason and re-engages only after
+            re-synchronising (reindex and alignment) instead of following at the speed
+            limit. A human hand turns at most about 1,000-1,500 deg/s.
     """
 
     mode: Literal["relative", "absolute"] = "relative"
@@ -68,6 +73,8 @@ class SessionConfig:
     max_speed_m_s: float = 1.5
     max_rot_speed_rad_s: float = 4.0
     unreachable_follow_m: float = 0.3
+    max_model_rate_rad_s: float = float(np.radians(2000.0))
+    max_model_speed_m_s: float = 10.0
 
     def __post_init__(self) -> None:
         if self.mode not in ("relative", "absolute"):
@@ -87,7 +94,13 @@ class SessionConfig:
                 f"workspace: each min must be below its max, got {self.workspace_min} and "
                 f"{self.workspace_max}"
             )
-        for name in ("max_speed_m_s", "max_rot_speed_rad_s", "link_timeout_s"):
+        for name in (
+            "max_speed_m_s",
+            "max_rot_speed_rad_s",
+            "link_timeout_s",
+            "max_model_rate_rad_s",
+            "max_model_speed_m_s",
+        ):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"{name}: expected a positive number")
 
@@ -132,6 +145,9 @@ class TeleopSession:
         self._lo = np.asarray(self.config.workspace_min, dtype=np.float64)
         self._hi = np.asarray(self.config.workspace_max, dtype=np.float64)
         self._prev = np.eye(4)
+        self._prev_model: FloatArray | None = None
+        self._prev_model_t = 0.0
+        self.jumps = 0  # model-pose jumps held
 
     # -- operator events -------------------------------------------------------------------
     def _go(self, t: float, target: State, reason: str) -> None:
@@ -174,8 +190,10 @@ class TeleopSession:
             self._go(t, State.ALIGNING, "clutch released: reindexing")
 
     def reindex(self, t: float) -> None:
-        """Take a new offset at the next tick (any state)."""
+        """Take a new offset at the next tick (any state); the model may jump then (a new
+        calibration), so the jump check starts over."""
         self._reindex_pending = True
+        self._prev_model = None
         log.info("reindex requested", extra={"event": "reindex", "t": t})
 
     @property
@@ -223,6 +241,10 @@ class TeleopSession:
                 T_model = None
         elif model_fault is None:
             model_fault = "no model pose"
+        if T_model is not None:
+            jump = self._jump(t, T_model)
+            if jump is not None:
+                model_fault = model_fault or jump
         link_fault = None
         if robot_pose is None or robot_age_s > c.link_timeout_s:
             link_fault = (
@@ -317,6 +339,25 @@ class TeleopSession:
             return TickOutput(self.state, notes=[*notes, why])
         self._last_sent = cmd
         return TickOutput(self.state, command=cmd, notes=notes)
+
+    def _jump(self, t: float, T_model: FloatArray) -> str | None:
+        """Why the model pose moved faster than a human can since the last one, or None."""
+        c = self.config
+        prev, t_prev = self._prev_model, self._prev_model_t
+        self._prev_model, self._prev_model_t = T_model.copy(), t
+        if prev is None:
+            return None
+        dt = max(t - t_prev, 1e-3)  # ticks closer than 1 ms: judged over 1 ms
+        dpos, drot = _kernels.pose_error(T_model, prev)
+        if drot <= c.max_model_rate_rad_s * dt and dpos <= c.max_model_speed_m_s * dt:
+            return None
+        self.jumps += 1
+        return (
+            f"model pose jumped {np.degrees(drot):.0f} deg / {dpos * 1e3:.0f} mm in "
+            f"{dt * 1e3:.0f} ms (limits {np.degrees(c.max_model_rate_rad_s):.0f} deg/s, "
+            f"{c.max_model_speed_m_s:g} m/s): a sensor glitch? held; re-engages after "
+            "re-synchronising"
+        )
 
     def _limit(self, cmd: FloatArray, dt: float) -> list[str]:
         """Workspace box and end-effector speed limits, in place; returns notes."""
