@@ -50,12 +50,11 @@ from mocapkit.teleop.server import RobotServerProcess, ServerConfig, spawn_robot
 log = logging.getLogger("mocapkit.teleop.simulated")
 
 #: Host-side filters in order of preference for the simulated chains, by the measured
-#: end-effector error through the live session in the demo's set-up (infinity,
-#: right_arm_torso_3, fused on the host with a still start, consumer-grade errors,
-#: calibrated magnetometers; seeds 0 and 1; docs/benchmarks.md): bachmann 2.5 / 4.5 mm,
-#: miller 2.7 / 4.6 mm, polaris 8.9 / 10.1 mm. polaris wins on BROAD and on longer
-#: simulated motions but not yet here; it moves first once it does.
-PREFERRED_FILTERS = ("bachmann", "polaris", "miller")
+#: end-effector error through the live session (six shapes, right_arm_2, fused on the
+#: host with a still start, consumer-grade errors; seeds 0 and 1; docs/benchmarks.md,
+#: "Polaris in the teleoperation chain"): bachmann 2.47 mm, polaris-body 2.81 mm,
+#: polaris 6.25 mm. polaris-body moves first once it wins there.
+PREFERRED_FILTERS = ("bachmann", "polaris-body", "polaris", "miller")
 _AHEAD_S = 8.0  # frames handed to the sender ahead of the clock [s]
 _CHUNK_S = 2.0  # ... in chunks of this much motion [s]
 
