@@ -250,8 +250,11 @@ def test_faults_through_the_real_chain_hold_say_why_and_recover():
         threading.Thread(target=pause, daemon=True).start()
 
     stretched = (0.3, -1.3, 1.7, -0.15, -1.5, 0.0, 0.3)  # R2's elbow nearly straight
+    # infinity, not circle: the operator model's 25 cm circle (and box) passes its arm
+    # through a singularity where the simulated segment orientations flip by up to 180 deg
+    # in one 10 ms sample, which the safety layer rightly holds as a glitch (> 2000 deg/s)
     r = evaluate_shape(
-        "circle",
+        "infinity",
         server=ServerConfig(q_start=stretched),
         shape_s=4.0,
         size_m=0.25,

@@ -349,6 +349,13 @@ def _decode(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     frames = read_frames(Path(args.recording))
+    if not frames:
+        from mocapkit.errors import FileFormatError
+
+        raise FileFormatError(
+            f"{args.recording}: no suit frames (/suit/packets) in this recording; a "
+            "teleoperation recording (/teleop/...) is read by 'mocapkit teleop playback'"
+        )
     buf = b"".join(f.data for f in frames)
     t1 = time.perf_counter()
     dec = decode_stream(buf)

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from mocapkit.errors import FileFormatError
 from mocapkit.io.broad import read_broad_trial
 from mocapkit.io.imu_csv import read_imu_csv
@@ -37,8 +39,52 @@ def _is_xsens_dir(p: Path) -> bool:
     return p.is_dir() and any(p.glob("MT_*.txt"))
 
 
+#: [rad/s] faster than any human segment turns (2000 deg/s, a MEMS gyroscope's range):
+#: readings above it are almost surely deg/s.
+MAX_PLAUSIBLE_GYR = 35.0
+#: [m/s^2] the median norm of a body-worn accelerometer is gravity, 9.81; near 1 it is in g.
+G_UNITS_BELOW = 3.0
+
+
+class UnitWarning(UserWarning):
+    """A recording's values look like another unit than the one its format promises."""
+
+
+def check_units(rec: ImuRecording) -> None:
+    """Warn when the gyroscope looks like deg/s or the accelerometer like g (naming the
+    column, the figure and the fix); the values are left as they are."""
+    import warnings
+
+    gyr = np.abs(rec.gyr)
+    if gyr.size and float(gyr.max()) > MAX_PLAUSIBLE_GYR:
+        k, axis = np.unravel_index(int(np.argmax(gyr)), gyr.shape)
+        warnings.warn(
+            f"{rec.name}: gyr column {'xyz'[axis]} reaches {float(gyr.max()):.4g} rad/s at sample "
+            f"{k} (over {MAX_PLAUSIBLE_GYR:g} rad/s = 2000 deg/s): the file's gyroscope looks "
+            "like deg/s; convert it to rad/s (multiply by pi/180) before using these results",
+            UnitWarning,
+            stacklevel=3,
+        )
+    norms = np.linalg.norm(rec.acc, axis=1)
+    if norms.size and float(np.median(norms)) < G_UNITS_BELOW:
+        warnings.warn(
+            f"{rec.name}: acc's median norm is {float(np.median(norms)):.3g} (gravity is 9.81 "
+            "m/s^2): the accelerometer looks like g; multiply by 9.81 before using these results",
+            UnitWarning,
+            stacklevel=3,
+        )
+
+
 def read_imu_recordings(path: str | Path) -> dict[str, ImuRecording]:
-    """Every sensor in ``path`` (see the module docstring for the formats)."""
+    """Every sensor in ``path`` (see the module docstring for the formats); a gyroscope
+    that looks like deg/s or an accelerometer like g is warned about (:func:`check_units`)."""
+    recs = _read_imu_recordings(path)
+    for rec in recs.values():
+        check_units(rec)
+    return recs
+
+
+def _read_imu_recordings(path: str | Path) -> dict[str, ImuRecording]:
     p = Path(path)
     if not p.exists():
         raise FileNotFoundError(f"{p}: no such file or directory")
