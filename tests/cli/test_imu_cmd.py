@@ -154,7 +154,8 @@ def test_calibrate_mag(
 def test_calibrate_mag_needs_a_magnetometer(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    rec = ImuRecording(np.arange(20) / 100.0, np.zeros((20, 3)), np.ones((20, 3)), name="s")
+    acc = np.tile([0.0, 0.0, 9.81], (20, 1))
+    rec = ImuRecording(np.arange(20) / 100.0, np.zeros((20, 3)), acc, name="s")
     path = write_imu_csv(tmp_path / "s.csv", rec)
     assert main(["imu", "calibrate-mag", str(path)]) == 1
     assert "s: this recording has no magnetometer to calibrate" in capsys.readouterr().err
