@@ -64,6 +64,10 @@ from mocapkit.teleop.link import RobotLink
 from mocapkit.teleop.retarget_setup import CHEST_IN_SEGMENT, setup_retarget
 from mocapkit.teleop.session import State, TeleopSession, TickOutput
 
+#: [s] a sensor clock that steps back further than this was reset (a reboot); shorter
+#: steps back are late or repeated samples, ignored as not fresh.
+CLOCK_RESET_S = 0.5
+
 log = logging.getLogger("mocapkit.teleop.pipeline")
 
 _LATENCY_CAPACITY = 1 << 17
@@ -388,17 +392,19 @@ class TeleopPipeline:
                 continue
             previous = self.t_sample[slot]
             if previous == previous and not s.t_sensor_s > previous:  # NaN: no sample yet
-                if s.t_sensor_s < previous:
-                    # ran backwards (a reset?): hold now (the session reindexes before it
-                    # follows again) and follow the new clock from here
+                if s.t_sensor_s < previous - CLOCK_RESET_S:
+                    # ran far backwards (a reset): hold now (the session reindexes before
+                    # it follows again) and follow the new clock from here
                     self.t_sample[slot] = s.t_sensor_s
                     self.bad[slot] = (
                         f"{self._label[slot]}: sensor clock ran backwards ({previous:.3f} -> "
                         f"{s.t_sensor_s:.3f} s)"
                     )
-                else:  # stands still: not fresh; the watchdog holds after stale_after_s
+                else:  # a late or repeated sample: not fresh; if the clock stays stuck,
+                    # the watchdog holds after stale_after_s and says so
                     self._clock_note[slot] = (
-                        f"{self._label[slot]}: sensor clock stands still at {previous:.3f} s"
+                        f"{self._label[slot]}: sensor clock stands still or runs backwards "
+                        f"(at {s.t_sensor_s:.3f} s after {previous:.3f} s)"
                     )
                 continue
             self._clock_note.pop(slot, None)
