@@ -17,6 +17,7 @@ import numpy as np
 
 from mocapkit._validate import FloatArray, check_shape
 from mocapkit.errors import FileFormatError, ShapeError
+from mocapkit.io._text_table import read_text
 
 _VALID_CHANNELS = {"Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"}
 
@@ -138,7 +139,7 @@ def write_bvh(path: str | Path, motion: BvhMotion, precision: int = 6) -> Path:
 def read_bvh(path: str | Path) -> BvhMotion:
     """Read a BVH file (any channel layout, several end sites, tabs or spaces)."""
     p = Path(path)
-    tokens_by_line = [line.split() for line in p.read_text().splitlines()]
+    tokens_by_line = [line.split() for line in read_text(p)]
     lines = [t for t in tokens_by_line if t]
     if not lines or lines[0][0] != "HIERARCHY":
         raise FileFormatError(f"{p}: does not start with HIERARCHY; is it a BVH file?")

@@ -26,13 +26,27 @@ class RecoveredRecordingWarning(UserWarning):
     """The recording had no summary (it was not closed): read up to its last record."""
 
 
-def _decode_errors() -> tuple[type[BaseException], ...]:
+def decode_errors() -> tuple[type[BaseException], ...]:
+    """The exceptions reading a damaged MCAP file can raise (mcap, zstd, struct...)."""
     import struct
 
     import zstandard
     from mcap.exceptions import McapError
 
-    return (McapError, EOFError, ValueError, struct.error, zstandard.ZstdError)
+    # a damaged length or offset field makes the mcap library seek or allocate absurdly:
+    # OSError (EINVAL), OverflowError, MemoryError are corruption here, not the machine
+    return (
+        McapError,
+        EOFError,
+        ValueError,
+        KeyError,
+        IndexError,
+        struct.error,
+        zstandard.ZstdError,
+        OSError,
+        OverflowError,
+        MemoryError,
+    )
 
 
 def summary_or_none(f: IO[bytes]) -> Any:
@@ -41,7 +55,7 @@ def summary_or_none(f: IO[bytes]) -> Any:
 
     try:
         return make_reader(f).get_summary()
-    except _decode_errors():
+    except decode_errors():
         return None
 
 
@@ -58,7 +72,7 @@ def iter_messages(
     from mcap.stream_reader import StreamReader
 
     wanted = None if topics is None else set(topics)
-    errors = _decode_errors()
+    errors = decode_errors()
     f.seek(0)
     if summary_or_none(f) is not None:
         f.seek(0)
@@ -71,11 +85,12 @@ def iter_messages(
                 "the file was damaged after it was written"
             ) from exc
         return
-    f.seek(0)
     channels: dict[int, Any] = {}
     count = 0
+    size = f.seek(0, 2)
+    f.seek(0)
     try:
-        for record in StreamReader(f).records:
+        for record in StreamReader(f, record_size_limit=max(size, 1)).records:
             if isinstance(record, Channel):
                 channels[record.id] = record
             elif isinstance(record, Message):

@@ -147,7 +147,7 @@ def read_frame_buffer(path: str | Path, topic: str = "/suit/packets") -> FrameBu
     from mcap.records import Chunk, Message
     from mcap.stream_reader import StreamReader
 
-    from mocapkit.io.mcap_recovery import iter_messages, summary_or_none
+    from mocapkit.io.mcap_recovery import decode_errors, iter_messages, summary_or_none
 
     p = Path(path)
     if not p.is_file():
@@ -184,7 +184,7 @@ def read_frame_buffer(path: str | Path, topic: str = "/suit/packets") -> FrameBu
                         _scan_chunk(raw, wanted, parts, p)
                     elif isinstance(rec, Message) and wanted[rec.channel_id]:
                         loose.append((rec.data, rec.log_time, rec.sequence))
-    except (McapError, ValueError, EOFError) as exc:
+    except (McapError, *decode_errors()) as exc:
         raise FileFormatError(f"{p}: not a readable MCAP recording ({exc})") from exc
     return _assemble(parts, loose)
 
