@@ -143,7 +143,6 @@ def _scan_chunk(raw: bytes, wanted: np.ndarray, parts: list[Any], path: Path) ->
 
 def read_frame_buffer(path: str | Path, topic: str = "/suit/packets") -> FrameBuffer:
     """Every frame on ``topic`` of an MCAP recording, fast (see the module docstring)."""
-    from mcap.exceptions import McapError
     from mcap.records import Chunk, Message
     from mcap.stream_reader import StreamReader
 
@@ -184,7 +183,7 @@ def read_frame_buffer(path: str | Path, topic: str = "/suit/packets") -> FrameBu
                         _scan_chunk(raw, wanted, parts, p)
                     elif isinstance(rec, Message) and wanted[rec.channel_id]:
                         loose.append((rec.data, rec.log_time, rec.sequence))
-    except (McapError, *decode_errors()) as exc:
+    except decode_errors() as exc:
         raise FileFormatError(f"{p}: not a readable MCAP recording ({exc})") from exc
     return _assemble(parts, loose)
 

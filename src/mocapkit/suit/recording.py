@@ -247,7 +247,6 @@ class RecordedFrame:
 def read_frames(path: str | Path) -> list[RecordedFrame]:
     """All ``/suit/packets`` frames of a recording, in arrival order (a recording that was
     never closed: up to its last complete record, with a warning)."""
-    from mcap.exceptions import McapError
 
     from mocapkit.io.mcap_recovery import decode_errors, iter_messages
 
@@ -262,7 +261,7 @@ def read_frames(path: str | Path) -> list[RecordedFrame]:
                     continue
                 frame = RecordedFrame(msg.data, msg.log_time, channel.metadata.get("source", ""))
                 rows.append((msg.log_time, msg.sequence, frame))
-    except (McapError, *decode_errors()) as exc:
+    except decode_errors() as exc:
         raise FileFormatError(f"{p}: not a readable MCAP recording ({exc})") from exc
     rows.sort(key=lambda r: (r[0], r[1]))
     return [r[2] for r in rows]
