@@ -191,3 +191,25 @@ def test_device_packet_numbers_interleave_sensors_without_false_loss() -> None:
     assert len(got) == 20
     assert {sid: s.lost for sid, s in st_.sensors.items()} == {1: 0, 2: 0}
     assert st_.dropped == {"duplicate": 1, "stale": 1}
+
+
+def test_a_malformed_packet_number_is_dropped_alone() -> None:
+    """A datagram with a garbage packet number must not silence the tracker: before, it
+    was taken as the newest and every real packet after it was "stale" until the next
+    handshake."""
+    from mocapkit.suit.transport import Frame
+
+    t = UdpTransport.bind("127.0.0.1", 0)
+    rx = Receiver(t, ReceiverConfig(protocols="slimevr"))
+    src = ("10.0.0.7", 6969)
+    now = time.perf_counter_ns()
+    for n in range(1, 6):
+        rx.handle(Frame(slimevr.build_rotation_data(n, 0, Q), src, now))
+    rx.handle(Frame(slimevr.build_rotation_data(2**62, 0, Q), src, now))  # garbage number
+    for n in range(6, 11):
+        rx.handle(Frame(slimevr.build_rotation_data(n, 0, Q), src, now))
+    got = rx.get_batch(100, 0.0)
+    st_ = rx.stats()
+    t.close()
+    assert len(got) == 10
+    assert st_.dropped == {"bad_sequence": 1}

@@ -42,6 +42,9 @@ from mocapkit.suit.transport import Frame, Transport
 
 log = logging.getLogger(__name__)
 _MAX_SOURCES = 4096  # token buckets kept at once
+# A SlimeVR device's packet number may skip this many (lost packets, hours of them at
+# 100 Hz); a bigger jump is a malformed datagram, not the device.
+_SLIME_MAX_JUMP = 1_000_000
 
 
 class Receiver:
@@ -148,13 +151,15 @@ class Receiver:
         st = self._stats
         st.datagrams += 1
         st.bytes += len(data)
-        if self.recorder is not None:
-            self.recorder.write_frame(data, now_ns, source)
         if self._rate_limited and not self._admit(source, now_ns):
+            # checked first, so a flooding source costs as little as possible (and does
+            # not fill the recording) while the other sources are served
             self._drop(
                 "rate_limited", f"source {source} exceeds {self.cfg.source_rate_hz:.0f} packets/s"
             )
             return
+        if self.recorder is not None:
+            self.recorder.write_frame(data, now_ns, source)
         if not data:
             self._drop("truncated", f"empty datagram from {source}")
             return
@@ -248,6 +253,14 @@ class Receiver:
         if last is not None and num <= last:
             reason = "duplicate" if num == last else "stale"
             self._drop(reason, f"SlimeVR packet {num} from {source} is not newer than {last}")
+            return
+        if last is not None and num - last > _SLIME_MAX_JUMP:
+            # a malformed (or forged) packet number: taking it would make every real
+            # packet look stale until the next handshake; drop this datagram alone
+            self._drop(
+                "bad_sequence",
+                f"SlimeVR packet {num} from {source} jumps {num - last} ahead of {last}",
+            )
             return
         self._slime_last[source] = num
         for m in messages:
