@@ -93,3 +93,25 @@ def test_malformed_exports(tmp_path: Path) -> None:
     empty.mkdir()
     with pytest.raises(FileFormatError, match=r"no MT_\*.txt Xsens MT Manager exports"):
         read_xsens_directory(empty)
+
+
+def test_a_counter_jump_that_cuts_the_trial_is_warned_about(tmp_path: Path) -> None:
+    from mocapkit.io.xsens import DataGapWarning
+
+    a = tmp_path / "MT_0_0_A.txt"
+    b = tmp_path / "MT_0_0_B.txt"
+    a.write_text(HEADER + LABELS + "\n" + _rows(list(range(10, 400))))
+    # B's counter jumps: its last 40 rows look 1000 packets later (a glitch)
+    b.write_text(HEADER + LABELS + "\n" + _rows(list(range(300, 340)) + list(range(1340, 1380))))
+    with pytest.warns(DataGapWarning, match=r"1000 packets missing"):
+        eb = read_xsens_export(b)
+    with pytest.warns(DataGapWarning, match=r"sensor A: only 100 of its 390 rows"):
+        trim_to_common_packets({"A": read_xsens_export(a), "B": eb})
+
+
+def test_orientations_that_are_not_rotations_are_refused(tmp_path: Path) -> None:
+    p = tmp_path / "MT_0_0_A.txt"
+    ones = "\t".join(["1"] * 9)
+    p.write_text(HEADER + LABELS + "\n" + _rows([1]) + "2\t0\t0\t9.81\t" + ones + "\n")
+    with pytest.raises(FileFormatError, match=r"data row 1 is not a rotation matrix"):
+        read_xsens_export(p)

@@ -20,6 +20,7 @@ packet but end at different ones: :func:`trim_to_common_packets` (used by
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,6 +32,11 @@ from mocapkit.errors import DataError, FileFormatError
 from mocapkit.geometry import quat_from_matrix
 from mocapkit.io._text_table import parse_rows, read_text
 from mocapkit.series import ImuRecording, OrientationSeries
+
+
+class DataGapWarning(UserWarning):
+    """Packets missing from an export, or rows dropped to align the sensors."""
+
 
 _ACC = ["Acc_X", "Acc_Y", "Acc_Z"]
 _GYR = ["Gyr_X", "Gyr_Y", "Gyr_Z"]
@@ -140,10 +146,36 @@ def read_xsens_export(path: str | Path, name: str | None = None) -> XsensExport:
     if np.any(np.diff(packet) <= 0):
         i = int(np.flatnonzero(np.diff(packet) <= 0)[0]) + 1
         raise FileFormatError(f"{p}: packet counter repeats at data row {i}")
+    gaps = np.flatnonzero(np.diff(packet) > 1)
+    if gaps.size:
+        lost = int(np.sum(np.diff(packet)[gaps] - 1))
+        big = int(gaps[np.argmax(np.diff(packet)[gaps])])
+        warnings.warn(
+            f"{p}: {lost} packets missing from the packet counter ({gaps.size} gaps, the "
+            f"largest after data row {big}: {int(packet[big])} -> {int(packet[big + 1])}); "
+            "the time axis follows the counter, so the gaps stay gaps",
+            DataGapWarning,
+            stacklevel=2,
+        )
     if has_quat:
         quat = np.column_stack([cols[c] for c in _QUAT])
+        norm = np.linalg.norm(quat, axis=1)
+        bad = np.flatnonzero(np.abs(norm - 1.0) > 0.01)
+        if bad.size:
+            raise FileFormatError(
+                f"{p}: Quat_q0..q3 at data row {bad[0]} has norm {norm[bad[0]]:.4g}, not a "
+                f"unit quaternion ({bad.size} such rows); is the column order w, x, y, z?"
+            )
     else:
         R = np.stack([cols[c] for c in _MAT], axis=1).reshape(-1, 3, 3)
+        off = np.abs(R @ np.transpose(R, (0, 2, 1)) - np.eye(3)).max(axis=(1, 2))
+        det = np.linalg.det(R)
+        bad = np.flatnonzero((off > 0.01) | (det < 0.0))
+        if bad.size:
+            raise FileFormatError(
+                f"{p}: Mat[1][1]..Mat[3][3] at data row {bad[0]} is not a rotation matrix "
+                f"(|R R^T - I| = {off[bad[0]]:.3g}, det {det[bad[0]]:.3g}; {bad.size} such rows)"
+            )
         quat = quat_from_matrix(R)
     time = (packet - packet[0]) / rate
     label = name or p.stem.rsplit("_", 1)[-1]
@@ -168,6 +200,16 @@ def trim_to_common_packets(exports: dict[str, XsensExport]) -> dict[str, XsensEx
     out = {}
     for key, e in exports.items():
         rows = (e.packet >= first) & (e.packet <= last)
+        kept = int(rows.sum())
+        if kept < 0.9 * e.packet.size and e.packet.size - kept > 100:  # not a ragged end
+            warnings.warn(
+                f"sensor {key}: only {kept} of its {e.packet.size} rows lie in the packets "
+                f"all sensors share ({first}..{last}); check the exports' packet counters "
+                "(a sensor that started late or stopped early shortens every sensor), or "
+                "read them with trim=False",
+                DataGapWarning,
+                stacklevel=2,
+            )
         out[key] = e.select(rows, first)
     return out
 
