@@ -7,7 +7,7 @@ Most used entry points::
     rx = Receiver(UdpTransport.bind("0.0.0.0", 9000)).start()
     for sample in rx.samples(): ...
 
-See ``docs/architecture.md`` ("Motion suit") and ``docs/protocol.md``.
+See ``docs/design/suit.md`` and ``docs/protocol.md``.
 """
 
 from mocapkit.suit.errors import ProtocolError

@@ -9,7 +9,7 @@ per second per reason (with the number suppressed), so a flood cannot flood the 
 
 Delivered samples go to one bounded queue per sensor; :meth:`Receiver.get_batch` and
 :meth:`Receiver.samples` take from them round-robin, so a sensor that floods only
-overflows its own queue. See the consumer API in docs/architecture.md ("Motion suit").
+overflows its own queue. See the consumer API in docs/design/suit.md.
 
 Direct consumer (``on_batch``): a latency-critical pipeline (teleoperation) can run on the
 receiver thread itself: ``on_batch(samples, now_ns)`` is called after every drained batch

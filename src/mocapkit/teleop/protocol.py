@@ -1,6 +1,6 @@
 """Robot-link protocol v1: end-effector commands and pose reports over UDP.
 
-Little-endian, one message per datagram (see docs/architecture.md, "Robot link")::
+Little-endian, one message per datagram (see docs/design/teleop.md, "Robot link")::
 
     0-3   magic b"MKRL"          4  version (1)         5  kind (1 COMMAND, 2 HOLD, 3 REPORT)
     6-7   flags u16              8-11 seq u32           12-19 t_send_ns u64 (CLOCK_MONOTONIC)

@@ -384,10 +384,12 @@ def spawn_robot_server(
     max_seconds: float = 600.0,
     ready_timeout_s: float = 30.0,
     nice: int = 0,
+    port: int = 0,
 ) -> RobotServerProcess:
-    """Start ``python -m mocapkit.teleop.server`` on a free loopback port and wait until it
-    is ready. The process exits by itself after ``max_seconds`` or if we die. ``nice``
-    lowers its scheduling priority (the evaluation runs it at 10: it stands in for the
+    """Start ``python -m mocapkit.teleop.server`` on a loopback port (``port``, 0: a free
+    one; a restarted server takes its predecessor's) and wait until it is ready. The
+    process exits by itself after ``max_seconds`` or if we die. ``nice`` lowers its
+    scheduling priority (the evaluation runs it at 10: it stands in for the
     robot's own computer, and on a shared machine must not preempt the host pipeline)."""
     c = config or ServerConfig()
     argv = [
@@ -395,7 +397,7 @@ def spawn_robot_server(
         "-m",
         "mocapkit.teleop.server",
         "--port",
-        "0",
+        str(port),
         "--robot",
         c.robot,
         "--rate-hz",

@@ -1,6 +1,6 @@
 """The teleoperation session: a state machine between the operator's model and the robot.
 
-States (docs/architecture.md, "Robots and teleoperation"): ``disabled``, ``aligning``,
+States (docs/design/teleop.md): ``disabled``, ``aligning``,
 ``engaged``, ``clutched``, ``held``. The session is pure logic: each :meth:`tick` gets
 the intermediate model's end-effector pose (or a fault), the robot's latest reported
 pose and its age, and returns what to send (a command, a HOLD, or nothing). Every

@@ -84,6 +84,9 @@ class SimulatedConfig:
         rate_hz: sample rate [Hz].
         heading_rad: where the operator faces [rad from world x].
         server: the robot server's settings.
+        record: an MCAP file to record the session to (None: no recording).
+        send_port: send the suit's datagrams to this loopback port instead of the
+            session's own (a relay in front of it, e.g. to inject network faults).
     """
 
     shapes: tuple[str, ...] = SHAPES
@@ -98,6 +101,8 @@ class SimulatedConfig:
     rate_hz: float = 100.0
     heading_rad: float = 0.0
     server: ServerConfig = field(default_factory=ServerConfig)
+    record: str | None = None
+    send_port: int | None = None
 
     def __post_init__(self) -> None:
         if self.duration_s is not None and not self.duration_s > 0:
@@ -172,7 +177,9 @@ class SimulatedSession:
         horizon = 1e6 if c.duration_s is None else c.duration_s + 120.0
         try:
             self.server = spawn_robot_server(c.server, max_seconds=horizon)
-            self.live = LiveSession(LiveConfig(pipeline=self.pipeline_config), self.server.address)
+            self.live = LiveSession(
+                LiveConfig(pipeline=self.pipeline_config), self.server.address, record=c.record
+            )
             self.live.start()
             end = time.monotonic() + 10.0  # (the receiver thread polls the link)
             while self.live.link.latest is None:
@@ -180,7 +187,8 @@ class SimulatedSession:
                     raise MocapkitError("the robot server did not report within 10 s")
                 time.sleep(0.01)
             first = self._take(round(_AHEAD_S * c.rate_hz))
-            self.sender = TimelineSender(first, "127.0.0.1", self.live.suit_port)
+            port = self.live.suit_port if c.send_port is None else c.send_port
+            self.sender = TimelineSender(first, "127.0.0.1", port)
             self.t_go = self.sender.go(stream=True)
         except BaseException:
             self.stop()

@@ -1,7 +1,7 @@
 """``polaris``: mocapkit's most accurate orientation filter (online and offline).
 
 Design (details, equations and the measured value of each part on BROAD in
-``docs/architecture.md``, section *polaris*):
+``docs/design/imu.md``, section *polaris*):
 
 - decoupled like VQF (Laidig and Seel 2023): the gyroscope is integrated into an
   almost-inertial frame I, the inclination ``q_acc = q_E6_I`` and the heading offset

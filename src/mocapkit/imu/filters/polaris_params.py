@@ -1,7 +1,7 @@
 """``polaris`` parameters (frozen, validated) and state (copyable, checkpointable).
 
 The algorithm is described in :mod:`mocapkit.imu.filters.polaris` and in
-``docs/architecture.md`` (section *polaris*). This module only holds numbers:
+``docs/design/imu.md`` (section *polaris*). This module only holds numbers:
 
 - :class:`PolarisParams`: the tuning, in SI units (radians, seconds), each with a
   physical meaning and a default (see the field comments for how it was chosen);

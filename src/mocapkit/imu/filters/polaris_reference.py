@@ -2,7 +2,7 @@
 
 The numba kernel (:mod:`mocapkit.imu.filters.polaris_kernels`) does exactly the same
 arithmetic on the flat state vector; tests hold the two to 1e-9 on real data. The
-equations (numbered as in ``docs/architecture.md``, section *polaris*):
+equations (numbered as in ``docs/design/imu.md``, section *polaris*):
 
 Per sample, with the bias-corrected rate ``w = gyr - b``:
 
