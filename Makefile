@@ -19,12 +19,13 @@ $(STAMP): pyproject.toml
 	$(BIN)/mocapkit demo --warm-up
 	@touch $(STAMP)
 
-# The peers (vqf, imufusion, ahrs, opensim): benchmarks and the round-trip tests that run
-# them. CI installs them (.ci/run); on a user's machine those tests skip without them.
+# The peers (vqf, imufusion, ahrs, opensim) and Ray (mocapkit batch --engine ray): the
+# benchmarks and the tests that run them. CI installs them (.ci/run); on a user's machine
+# those tests skip without them.
 setup-bench: $(BENCH_STAMP)
 
 $(BENCH_STAMP): $(STAMP)
-	$(BIN)/python -m pip install --quiet -e '.[dev,viz,robots,bench]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,viz,robots,bench,corpus]'
 	@touch $(BENCH_STAMP)
 
 demo: $(STAMP)

@@ -29,6 +29,10 @@ from mocapkit.errors import MissingDependencyError, MocapkitError
 # other command modules (and their numpy/scipy/numba/matplotlib): a command starts with
 # only what it uses. tests/cli/test_help.py checks that each line equals the module's own.
 _COMMANDS: dict[str, tuple[str, str]] = {
+    "batch": (
+        "mocapkit.cli.batch_cmd",
+        "a single-file command over many recordings (local processes or Ray)",
+    ),
     "body": ("mocapkit.cli.body_cmd", "sensor orientations -> body joint angles"),
     "demo": (
         "mocapkit.cli.demo_cmd",
