@@ -96,14 +96,24 @@ def write_table(
     lines.append("endheader")
     lines.append("\t".join(["time", *labels]))
     if quat:
-        for i in range(t.shape[0]):
-            cells = [",".join(f"{v:.10g}" for v in d[i, j]) for j in range(len(labels))]
-            lines.append("\t".join([f"{t[i]:.10g}", *cells]))
+        cell = ",".join(["%.10g"] * 4)
+        fmt = "\t".join(["%.10g", *([cell] * len(labels))])
+        flat = d.reshape(t.shape[0], -1)
     else:
         fmt = "\t".join(["%.10g"] * (len(labels) + 1))
-        lines += [fmt % tuple(row) for row in np.column_stack([t, d]).tolist()]
-    p.write_text("\n".join(lines) + "\n")
+        flat = d
+    # written block by block (bounded memory for hour-long tables); one C-level format
+    # per row instead of one Python f-string per value (imu run spent 60 % writing)
+    with open(p, "w") as f:
+        f.write("\n".join(lines) + "\n")
+        for a in range(0, t.shape[0], _BLOCK_ROWS):
+            b = min(t.shape[0], a + _BLOCK_ROWS)
+            rows = np.column_stack([t[a:b], flat[a:b]]).tolist()
+            f.write("\n".join([fmt % tuple(r) for r in rows]) + "\n")
     return p
+
+
+_BLOCK_ROWS = 50_000
 
 
 def _parse_block_fast(block: list[str], k: int, quat: bool) -> tuple[FloatArray, FloatArray] | None:
