@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import socket
+import time
 
 import numpy as np
 import pytest
@@ -162,3 +163,39 @@ def test_control_socket_off_loopback_needs_a_key_and_checks_it() -> None:
         a.sendto(sign(key, 2, "clutch off"), addr)
         assert _reply(a)["ok"]
     assert live.clutched == [True, False]
+
+
+def test_the_robot_link_signed_end_to_end(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A server started with a key answers only signed datagrams and signs its reports;
+    an unsigned client, a client with the wrong key and a replayed datagram get nothing."""
+    from mocapkit.teleop import protocol as proto
+    from mocapkit.teleop.link import RobotLink
+    from mocapkit.teleop.server import spawn_robot_server
+
+    key_file = tmp_path / "robot.key"
+    key_file.write_bytes(b"0123456789abcdef-shared")
+    key = b"0123456789abcdef-shared"
+    with spawn_robot_server(max_seconds=60.0, key_file=str(key_file)) as srv:
+        for wrong in (None, b"another key of sixteen+"):
+            with RobotLink(srv.address, key=wrong) as link:
+                link.send_hold()
+                assert not link.wait_for_report(0.5)
+        with RobotLink(srv.address, key=key) as link:
+            link.send_hold()
+            assert link.wait_for_report(5.0)
+            assert link.latest is not None
+            assert link.malformed == 0
+        # another address is refused while the paired client is active, accepted (paired
+        # anew) after it has been silent for PAIR_TIMEOUT_S
+        time.sleep(1.2)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as raw:
+            raw.settimeout(2.0)
+            raw.sendto(proto.sign(proto.encode_hold(5, 0), key), srv.address)
+            data, _ = raw.recvfrom(4096)
+            assert isinstance(proto.decode(proto.open_signed(data, key)), proto.Report)
+
+
+def test_a_robot_server_off_loopback_needs_a_key() -> None:
+    from mocapkit.teleop.server import main as server_main
+
+    assert server_main(["--host", "0.0.0.0", "--port", "0", "--max-seconds", "1"]) == 1

@@ -7,8 +7,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
 from benchmarks.soak import soak
+
 from mocapkit.teleop.recording import read_messages
 
 pytestmark = pytest.mark.realtime

@@ -106,6 +106,11 @@ def register(sub: Any) -> None:
     rn.add_argument("--keys", action="store_true", help="read commands from stdin lines")
     rn.add_argument("--record", type=Path, default=None, help="record the session (MCAP)")
     rn.add_argument("--calibrate-seconds", type=float, default=1.0, help="calibration hold")
+    rn.add_argument(
+        "--robot-key-file",
+        default=None,
+        help="shared key of a robot server off this machine (its --key-file): signed link",
+    )
     rn.add_argument("--json", action="store_true", help="print the final summary as JSON")
     _pipeline_args(rn)
     rn.set_defaults(func=_run)
@@ -201,7 +206,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace) -> int:
     from mocapkit.teleop.live import LiveConfig
     from mocapkit.teleop.run import RunOptions, parse_commands, run_live
-    from mocapkit.teleop.server import ServerConfig
+    from mocapkit.teleop.server import ServerConfig, read_key
 
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(name)s: %(message)s")
     config = LiveConfig(
@@ -209,6 +214,7 @@ def _run(args: argparse.Namespace) -> int:
         suit_host=args.suit_host,
         suit_port=args.suit_port,
         calibrate_s=args.calibrate_seconds,
+        robot_key=read_key(args.robot_key_file),
     )
     options = RunOptions(
         server=None if args.server is None else _address(args.server),

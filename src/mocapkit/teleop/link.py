@@ -18,7 +18,8 @@ log = logging.getLogger("mocapkit.teleop.link")
 
 
 class RobotLink:
-    """A UDP client of the robot server (loopback or LAN), non-blocking.
+    """A UDP client of the robot server (loopback or LAN), non-blocking; with ``key`` every
+    datagram is signed and every report checked (:func:`~mocapkit.teleop.protocol.sign`).
 
     Attributes:
         latest: the newest :class:`~mocapkit.teleop.protocol.Report` or None.
@@ -29,8 +30,10 @@ class RobotLink:
         self,
         address: tuple[str, int],
         on_report: Callable[[float, proto.Report], None] | None = None,
+        key: bytes | None = None,
     ) -> None:
         self.address = address
+        self.key = key
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
         self.sock.connect(address)
@@ -54,6 +57,8 @@ class RobotLink:
         self.close()
 
     def _send(self, data: bytes) -> bool:
+        if self.key is not None:
+            data = proto.sign(data, self.key)
         try:
             self.sock.send(data)
             return True
@@ -85,10 +90,15 @@ class RobotLink:
             except OSError:  # ECONNREFUSED: nobody listens (yet)
                 return n
             try:
-                msg = proto.decode(data)
+                msg = proto.decode(data if self.key is None else proto.open_signed(data, self.key))
             except proto.LinkProtocolError as exc:
                 self.malformed += 1
                 log.warning("dropped report: %s", exc)
+                continue
+            last = self.latest
+            if self.key is not None and last is not None and msg.seq <= last.seq:
+                self.malformed += 1
+                log.warning("dropped report %d: not newer than %d (a replay?)", msg.seq, last.seq)
                 continue
             if isinstance(msg, proto.Report):
                 t = time.monotonic()

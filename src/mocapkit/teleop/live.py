@@ -58,6 +58,8 @@ class LiveConfig:
         suit_host, suit_port: where the suit's UDP stream arrives (port 0: any free port).
         receiver: the suit receiver's settings.
         calibrate_s: how long the operator holds the calibration pose [s].
+        robot_key: shared key of a signed robot link (the server's ``--key-file``), or
+            None on loopback.
     """
 
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
@@ -66,6 +68,7 @@ class LiveConfig:
     suit_port: int = 0
     receiver: ReceiverConfig = field(default_factory=ReceiverConfig)
     calibrate_s: float = 1.0
+    robot_key: bytes | None = None
 
 
 class _Pending:
@@ -123,7 +126,7 @@ class LiveSession:
     ) -> None:
         self.config = config
         self.session = TeleopSession(config.session)
-        self.link = RobotLink(robot_address, on_report=self._on_report)
+        self.link = RobotLink(robot_address, on_report=self._on_report, key=config.robot_key)
         self.pipeline = TeleopPipeline(config.pipeline, self.session, self.link)
         self.pipeline.keep_frames = keep_frames
         self.pipeline.on_frame = self._on_frame

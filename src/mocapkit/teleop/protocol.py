@@ -11,10 +11,18 @@ Little-endian, one message per datagram (see docs/design/teleop.md, "Robot link"
 
 Decoding raises :class:`LinkProtocolError` (a ``DataError``) with the reason; the server
 counts and drops such datagrams.
+
+Signed datagrams (a link that leaves the machine: the server refuses a non-loopback
+address without a key): flag bit 0 set and the first 16 bytes of the HMAC-SHA256 of the
+message under the shared key appended (:func:`sign`, :func:`open_signed`); the receiver
+also refuses a sequence number that is not newer than the last one it accepted from its
+peer (a replayed datagram).
 """
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import struct
 from dataclasses import dataclass
 from enum import IntEnum
@@ -30,6 +38,8 @@ _HEADER = struct.Struct("<4sBBHIQ")  # 20 bytes
 _POSE = struct.Struct("<7d")  # 56 bytes
 _REPORT_TAIL = struct.Struct("<IBBB")  # 7 bytes
 MAX_JOINTS = 32
+FLAG_SIGNED = 0x1
+MAC_LEN = 16
 
 
 class Kind(IntEnum):
@@ -121,6 +131,31 @@ def encode_report(
         + _REPORT_TAIL.pack(last_command_seq & 0xFFFFFFFF, int(gate), int(reason), n)
         + struct.pack(f"<{n}d", *q)
     )
+
+
+def _mac(key: bytes, data: bytes) -> bytes:
+    return hmac.new(key, data, hashlib.sha256).digest()[:MAC_LEN]
+
+
+def sign(data: bytes, key: bytes) -> bytes:
+    """The message with the signed flag set and its MAC appended."""
+    flags = struct.unpack_from("<H", data, 6)[0] | FLAG_SIGNED
+    body = data[:6] + struct.pack("<H", flags) + data[8:]
+    return body + _mac(key, body)
+
+
+def open_signed(data: bytes, key: bytes) -> bytes:
+    """The message of a signed datagram (MAC checked and removed); LinkProtocolError for
+    an unsigned or forged one."""
+    if len(data) < _HEADER.size + MAC_LEN:
+        raise LinkProtocolError(f"datagram of {len(data)} bytes is too short to be signed")
+    flags = struct.unpack_from("<H", data, 6)[0]
+    if not flags & FLAG_SIGNED:
+        raise LinkProtocolError("unsigned datagram on a link that requires a shared key")
+    body, mac = data[:-MAC_LEN], data[-MAC_LEN:]
+    if not hmac.compare_digest(mac, _mac(key, body)):
+        raise LinkProtocolError("bad signature (HMAC-SHA256 under the shared key)")
+    return body
 
 
 def decode(data: bytes) -> Message:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import os
 import select
 import signal
@@ -32,6 +33,7 @@ import time
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -205,9 +207,16 @@ def serve(
     sock: socket.socket,
     max_seconds: float | None = None,
     parent_pid: int | None = None,
+    key: bytes | None = None,
 ) -> None:
     """Run the robot on a bound UDP socket until SIGTERM/SIGINT, ``max_seconds``, or the
-    parent process (``parent_pid``) going away."""
+    parent process (``parent_pid``) going away.
+
+    The first client whose datagram is valid is paired: datagrams from any other address
+    are dropped until the paired one has been silent for ``PAIR_TIMEOUT_S`` (a restarted
+    host session then pairs anew). With ``key`` every datagram must be signed and newer
+    than the last one accepted (:func:`~mocapkit.teleop.protocol.open_signed`), and the
+    reports are signed."""
     stop = False
 
     def _stop(*_: object) -> None:
@@ -223,6 +232,8 @@ def serve(
     next_tick = start
     next_report = start
     client: tuple[str, int] | None = None
+    client_seen = -math.inf
+    last_seq = -1
     seq = 0
     while not stop:
         now = time.monotonic()
@@ -238,14 +249,24 @@ def serve(
                     data, addr = sock.recvfrom(2048)
                 except BlockingIOError:
                     break
-                client = addr
                 t = time.monotonic()
+                if client is not None and addr != client and t - client_seen < PAIR_TIMEOUT_S:
+                    sim.state.malformed += 1
+                    log.warning("dropped datagram from %s: not the paired client %s", addr, client)
+                    continue
                 try:
-                    msg = proto.decode(data)
+                    msg = proto.decode(data if key is None else proto.open_signed(data, key))
                 except proto.LinkProtocolError as exc:
                     sim.state.malformed += 1
                     log.warning("dropped datagram from %s: %s", addr, exc)
                     continue
+                if addr != client:  # a new (or the first) client: pair with it
+                    client, last_seq = addr, -1
+                elif key is not None and msg.seq <= last_seq:
+                    sim.state.malformed += 1
+                    log.warning("dropped datagram %d from %s: a replay", msg.seq, addr)
+                    continue
+                client_seen, last_seq = t, msg.seq
                 if isinstance(msg, proto.Command):
                     sim.on_command(msg, t)
                 elif isinstance(msg, proto.Hold):
@@ -259,10 +280,15 @@ def serve(
         if client is not None and now >= next_report:
             seq += 1
             try:
-                sock.sendto(sim.report(seq, time.monotonic_ns()), client)
+                report = sim.report(seq, time.monotonic_ns())
+                sock.sendto(report if key is None else proto.sign(report, key), client)
             except OSError as exc:  # the client went away: keep serving
                 log.debug("report to %s failed: %s", client, exc)
             next_report = max(next_report + report_period, now)
+
+
+#: [s] the paired client may be replaced by another address after this much silence.
+PAIR_TIMEOUT_S = 1.0
 
 
 def build_sim(config: ServerConfig) -> RobotSim:
@@ -292,6 +318,12 @@ def config_args(parser: argparse.ArgumentParser) -> None:
         help="initial joints, comma-separated degrees (default: the arm's ready posture)",
     )
     parser.add_argument("--max-seconds", type=float, default=None, help="stop after this long")
+    parser.add_argument(
+        "--key-file",
+        default=None,
+        help="shared key for signed datagrams (required off loopback; the host's "
+        "teleop run --robot-key-file must name the same key)",
+    )
 
 
 def config_from_args(args: argparse.Namespace) -> ServerConfig:
@@ -322,15 +354,40 @@ def _q_start(text: str | None) -> tuple[float, ...] | None:
 
 def run_from_args(args: argparse.Namespace, parent_pid: int | None = None) -> int:
     """Bind, print ``READY <port>`` on stdout, serve."""
+    key = read_key(args.key_file)
+    if key is None and not _is_loopback(args.host):
+        raise ConfigError(
+            f"--host {args.host}: the robot port moves a robot; off loopback it needs a shared "
+            "key (--key-file, the same file as the host's --robot-key-file), or bind 127.0.0.1"
+        )
     sim = build_sim(config_from_args(args))
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
         sock.bind((args.host, args.port))
         print(f"READY {sock.getsockname()[1]}", flush=True)
-        serve(sim, sock, args.max_seconds, parent_pid)
+        serve(sim, sock, args.max_seconds, parent_pid, key)
     finally:
         sock.close()
     return 0
+
+
+def read_key(path: str | None) -> bytes | None:
+    """The shared key in a file (its bytes, surrounding whitespace removed), or None."""
+    if path is None:
+        return None
+    key = Path(path).read_bytes().strip()
+    if len(key) < 16:
+        raise ConfigError(f"--key-file {path}: the key has {len(key)} bytes; use at least 16")
+    return key
+
+
+def _is_loopback(host: str) -> bool:
+    import ipaddress
+
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return host == "localhost"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -385,6 +442,7 @@ def spawn_robot_server(
     ready_timeout_s: float = 30.0,
     nice: int = 0,
     port: int = 0,
+    key_file: str | None = None,
 ) -> RobotServerProcess:
     """Start ``python -m mocapkit.teleop.server`` on a loopback port (``port``, 0: a free
     one; a restarted server takes its predecessor's) and wait until it is ready. The
@@ -423,6 +481,7 @@ def spawn_robot_server(
         ),
         "--parent-pid",
         str(os.getpid()),
+        *(["--key-file", key_file] if key_file is not None else []),
     ]
 
     def lower_priority() -> None:  # pragma: no cover (runs in the child)
