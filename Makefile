@@ -25,7 +25,7 @@ $(STAMP): pyproject.toml
 setup-bench: $(BENCH_STAMP)
 
 $(BENCH_STAMP): $(STAMP)
-	$(BIN)/python -m pip install --quiet -e '.[dev,viz,robots,bench,corpus]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,viz,robots,bench,corpus,ros]'
 	@touch $(BENCH_STAMP)
 
 demo: $(STAMP)

@@ -38,6 +38,10 @@ _COMMANDS: dict[str, tuple[str, str]] = {
         "mocapkit.cli.demo_cmd",
         "run the whole pipeline on bundled data and write an HTML report",
     ),
+    "export": (
+        "mocapkit.cli.export_cmd",
+        "recordings and results into other tools' formats (ROS 2 bags)",
+    ),
     "imu": ("mocapkit.cli.imu_cmd", "inertial orientation: evaluate, run, calibrate"),
     "markers": (
         "mocapkit.cli.markers_cmd",
