@@ -146,6 +146,12 @@ def run() -> list[dict[str, Any]]:
                 raise RuntimeError("the session never engaged")
             for name, length in FAULTS:
                 time.sleep(GAP_S)
+                if sim.snapshot().get("state") != "engaged":
+                    # the operator's shape left the robot's reach meanwhile (the session
+                    # stopped following, as it should): engage again before the next fault
+                    sim.live.disengage()
+                    sim.live.engage()
+                    _wait_engaged(sim, 10.0)
                 before = sim.snapshot()
                 n_tr = len(sim.live.session.transitions)
                 dropped0 = dict(before.get("dropped", {}))
@@ -172,7 +178,8 @@ def run() -> list[dict[str, Any]]:
                     if v - dropped0.get(k, 0)
                 }
                 rows.append({"fault": name, "length_s": length, "transitions": trs,
-                             "engaged_after_s": back, "dropped": dropped})  # fmt: skip
+                             "engaged_after_s": back, "dropped": dropped,
+                             "state_before": before.get("state")})  # fmt: skip
                 print(rows[-1], flush=True)
     finally:
         relay.stop()

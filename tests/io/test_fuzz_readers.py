@@ -19,11 +19,13 @@ from hypothesis import strategies as st
 
 from mocapkit.errors import MocapkitError
 from mocapkit.io.bvh import read_bvh
+from mocapkit.io.c3d import read_c3d, write_c3d
 from mocapkit.io.imu_csv import read_imu_csv, write_imu_csv
 from mocapkit.io.joint_angles_mot import read_joint_angles_mot, write_joint_angles_mot
 from mocapkit.io.opensense import read_orientations_sto, write_orientations_sto
 from mocapkit.io.opensim_table import read_table
 from mocapkit.io.trc import read_trc
+from mocapkit.markers.trajectories import MarkerTrajectories
 from mocapkit.series import ImuRecording, JointAngleSeries, OrientationSeries
 from mocapkit.suit.mcap_fast import read_frame_buffer
 from mocapkit.suit.recording import McapRecorder, read_frames
@@ -57,6 +59,10 @@ def _seed_files(tmp: Path) -> dict[str, bytes]:
         for k in range(20):
             r.write_frame(bytes([k]) * 18, 1_000_000 * k)
     out["suit_mcap"] = (tmp / "a.mcap").read_bytes()
+    traj = MarkerTrajectories(
+        np.arange(20) / 100.0, np.random.default_rng(0).normal(size=(20, 3, 3)), ["A", "B", "C"]
+    )
+    out["c3d"] = write_c3d(tmp / "a.c3d", traj).read_bytes()
     with TeleopRecorder(tmp / "b.mcap") as tr:
         for k in range(20):
             tr.command(0.01 * k, [0.1, 0.2, 0.3], [1.0, 0.0, 0.0, 0.0])
@@ -74,6 +80,7 @@ READERS: dict[str, tuple[str, Callable[[Path], Any]]] = {
     "table": (".sto", read_table),
     "trc": (".trc", read_trc),
     "bvh": (".bvh", read_bvh),
+    "c3d": (".c3d", read_c3d),  # ezc3d is native: a damaged file once crashed the process
     "suit_mcap": (".mcap", read_frames),
     "suit_mcap_fast": (".mcap", read_frame_buffer),
     "teleop_mcap": (".mcap", lambda p: read_messages(p, "/teleop/command")),

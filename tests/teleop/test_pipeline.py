@@ -210,6 +210,9 @@ class _FakeLink:
     def report_age(self, now: float) -> float:
         return 0.0
 
+    def keepalive(self, now: float | None = None) -> bool:
+        return False
+
     def send_command(self, T: np.ndarray) -> int:
         self.commands.append(T)
         return len(self.commands)

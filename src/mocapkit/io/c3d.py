@@ -20,8 +20,10 @@ the rest would be lost silently). Write: millimetres, residual -1 for gaps; more
 from __future__ import annotations
 
 import logging
+import os
 import re
 import struct
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -119,6 +121,97 @@ def _strip_prefix(labels: list[str]) -> tuple[list[str], str]:
     return labels, ""
 
 
+def check_structure(path: Path) -> None:
+    """Walk the C3D header and parameter section in Python before ezc3d reads the file:
+    ezc3d (native code) crashes the whole process on a damaged parameter section
+    (found by fuzzing), where a clear error is owed. Raises FileFormatError naming the
+    byte; a sane file passes untouched (the data section is left to ezc3d)."""
+    data = path.read_bytes()
+
+    def bad(where: int, what: str) -> FileFormatError:
+        return FileFormatError(
+            f"{path}: damaged C3D ({what} at byte {where}); re-export the trial or restore "
+            "the file from its source"
+        )
+
+    if len(data) < 512 or data[1] != 0x50:
+        raise bad(1, "no C3D signature (byte 2 must be 0x50)")
+    block = data[0]
+    start = 512 * (block - 1)
+    if block < 2 or start + 4 > len(data):
+        raise bad(0, f"parameter section at block {block} outside the file")
+    n_blocks, processor = data[start + 2], data[start + 3]
+    if processor not in (84, 85, 86):
+        raise bad(start + 3, f"unknown processor type {processor}")
+    end = min(len(data), start + 512 * max(1, n_blocks))
+    fmt = ">" if processor == 86 else "<"
+    p = start + 4
+    groups: set[int] = set()
+    params: set[int] = set()
+    while p + 2 <= end:
+        name_len = abs(struct.unpack_from("b", data, p)[0])
+        gid = struct.unpack_from("b", data, p + 1)[0]
+        if name_len == 0:
+            break  # the end of the parameters
+        q = p + 2 + name_len
+        if q + 2 > end:
+            raise bad(p, "a parameter name runs past the section")
+        offset = struct.unpack_from(fmt + "h", data, q)[0]
+        if offset == 0:
+            break
+        nxt = q + offset
+        if offset < 0 or nxt > end:
+            raise bad(q, f"a record points to byte {nxt}, outside the parameter section")
+        if gid < 0:
+            if q + 3 > nxt or q + 3 + data[q + 2] > nxt:
+                raise bad(q + 2, "a group's description runs past its record")
+            groups.add(-gid)
+        elif gid > 0:
+            params.add(gid)
+            r = q + 2
+            if r + 2 > nxt:
+                raise bad(r, "a parameter's type runs past its record")
+            kind = struct.unpack_from("b", data, r)[0]
+            ndim = data[r + 1]
+            if kind not in (-1, 1, 2, 4) or ndim > 7 or r + 2 + ndim > nxt:
+                raise bad(r, f"a parameter has type {kind} and {ndim} dimensions")
+            size = abs(kind)
+            for d in data[r + 2 : r + 2 + ndim]:
+                size *= d
+            desc = r + 2 + ndim + size
+            if desc + 1 > nxt or desc + 1 + data[desc] > nxt:
+                raise bad(r, "a parameter's values or description run past its record")
+        p = nxt
+    if not groups:
+        raise bad(start + 4, "no parameter group")
+    orphans = sorted(params - groups)
+    if orphans:
+        raise bad(start + 4, f"parameters of undefined group(s) {orphans}")
+
+
+def probe_in_child(path: Path, ezc3d: Any) -> None:
+    """Let ezc3d read the file once in a forked child first (POSIX): damage that the
+    structural check does not see can still crash it (a segfault kills the process with
+    no message); here it kills only the child, and the user gets an error."""
+    if not hasattr(os, "fork"):
+        return
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)  # fork() with threads: the
+        pid = os.fork()  # child only runs ezc3d and exits at once
+    if pid == 0:  # pragma: no cover (the child)
+        try:
+            ezc3d.c3d(str(path))
+        except BaseException:
+            os._exit(1)  # an exception: the parent reads again and reports it
+        os._exit(0)
+    _, status = os.waitpid(pid, 0)
+    if os.WIFSIGNALED(status):
+        raise FileFormatError(
+            f"{path}: damaged C3D: the C3D library (ezc3d) crashed reading it (signal "
+            f"{os.WTERMSIG(status)}); re-export the trial or restore the file from its source"
+        )
+
+
 def _declared_frames(path: Path, c3d: Any) -> int | None:
     """The frame count the file's own header announces (ezc3d rewrites its copy of the
     header to what it could read), or None when it cannot say (past 65,535 frames)."""
@@ -205,6 +298,8 @@ def read_c3d(path: str | Path, units: str | None = None) -> MarkerTrajectories:
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no such C3D file")
     ezc3d = _ezc3d()
+    check_structure(p)
+    probe_in_child(p, ezc3d)
     try:
         c3d = ezc3d.c3d(str(p))
     except (RuntimeError, ValueError, IndexError, OSError) as exc:

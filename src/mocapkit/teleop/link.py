@@ -17,6 +17,10 @@ from mocapkit.teleop import protocol as proto
 log = logging.getLogger("mocapkit.teleop.link")
 
 
+#: [s] silence of the server after which the link sends a HOLD to be heard again.
+KEEPALIVE_S = 0.5
+
+
 class RobotLink:
     """A UDP client of the robot server (loopback or LAN), non-blocking; with ``key`` every
     datagram is signed and every report checked (:func:`~mocapkit.teleop.protocol.sign`).
@@ -46,6 +50,7 @@ class RobotLink:
         self._quat = np.empty(4)
         self._pose = np.eye(4)
         self._pose_of: proto.Report | None = None
+        self._last_ping = -np.inf
 
     def close(self) -> None:
         self.sock.close()
@@ -106,6 +111,19 @@ class RobotLink:
                 n += 1
                 if self.on_report is not None:
                     self.on_report(t, msg)
+
+    def keepalive(self, now: float | None = None) -> bool:
+        """When the server has been silent for ``KEEPALIVE_S`` (killed and restarted, or
+        not started yet), send a HOLD at most every ``KEEPALIVE_S``: a server reports to
+        the client it last heard from, so a session on hold (which sends no commands)
+        would otherwise never hear from a restarted server. A HOLD cannot move the robot.
+        Returns whether one was sent."""
+        now = time.monotonic() if now is None else now
+        if now - self.latest_t < KEEPALIVE_S or now - self._last_ping < KEEPALIVE_S:
+            return False
+        self._last_ping = now
+        self.send_hold()
+        return True
 
     def robot_pose(self) -> FloatArray | None:
         """The latest reported pose T_base_ee (4, 4), or None. Computed once per report

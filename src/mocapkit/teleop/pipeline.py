@@ -527,6 +527,7 @@ class TeleopPipeline:
         now = time.monotonic() if now is None else now
         if self.link is not None:
             self.link.poll()  # reports (and keep the socket drained) on every tick
+            self.link.keepalive()  # a restarted server learns where to report
         oldest = self.ingest(samples, now) if samples else None
         if oldest is None:
             # no new data: only the watchdogs, so a dropout holds the robot at once
