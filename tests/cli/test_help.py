@@ -82,3 +82,24 @@ def test_help_imports_no_heavy_package(argv: list[str]) -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True
     ).stdout
     assert out.strip().splitlines()[-1] == "[]", out
+
+
+def test_every_option_has_help() -> None:
+    """Every option and argument of every command says what it is (issue 15: 59 did not)."""
+    import argparse
+
+    from mocapkit.cli.main import build_parser
+
+    missing = []
+
+    def walk(parser: argparse.ArgumentParser, path: str) -> None:
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    walk(sub, f"{path} {name}")
+            elif not isinstance(action, (argparse._HelpAction, argparse._VersionAction)):
+                if not action.help:
+                    missing.append(f"{path} {'/'.join(action.option_strings) or action.dest}")
+
+    walk(build_parser(every=True), "mocapkit")
+    assert missing == []

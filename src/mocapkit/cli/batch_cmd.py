@@ -35,7 +35,12 @@ def register(sub: Any) -> None:
     )
     p.add_argument("-o", "--output", required=True, help="output directory")
     p.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
-    p.add_argument("--engine", choices=["local", "ray"], default="local")
+    p.add_argument(
+        "--engine",
+        choices=["local", "ray"],
+        default="local",
+        help="local: worker processes here (default); ray: a Ray cluster",
+    )
     p.add_argument("--ray-address", default=None, help="a Ray cluster (default: a local one)")
     p.add_argument("--force", action="store_true", help="redo inputs whose output exists")
     p.add_argument("--json", action="store_true", help="print one JSON summary")

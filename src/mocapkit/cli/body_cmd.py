@@ -252,17 +252,43 @@ def register(subparsers: Any) -> None:
         choices=("auto", "npose", "tpose", "anatomical", "connectors_up"),
         help="auto: mountings and heading from a still window and the motion",
     )
-    a.add_argument("--calib-window", nargs=2, type=float, metavar=("T0", "T1"))
+    a.add_argument(
+        "--calib-window",
+        nargs=2,
+        type=float,
+        metavar=("T0", "T1"),
+        help="start and end [s] of the held calibration pose (default: found from the motion)",
+    )
     a.add_argument("--placement", help="separate calibration recording (OpenSense placement .sto)")
     a.add_argument("--heading-sensor", help="sensor whose --heading-axis points forward")
     a.add_argument("--heading-axis", default="x", help="x, y, z, -x, -y or -z")
     a.add_argument(
         "--heading-deg", type=float, help="body heading at calibration [deg from world x]"
     )
-    a.add_argument("--heading-alignment", choices=("shared", "pose"), default="shared")
-    a.add_argument("--root-reference", choices=("body", "world"), default="body")
-    a.add_argument("--dropout", choices=("nan", "hold"), default="nan")
-    a.add_argument("--max-hold-s", type=float, default=0.5)
+    a.add_argument(
+        "--heading-alignment",
+        choices=("shared", "pose"),
+        default="shared",
+        help="how the sensors' headings are aligned at calibration",
+    )
+    a.add_argument(
+        "--root-reference",
+        choices=("body", "world"),
+        default="body",
+        help="what the root segment's orientation is measured against",
+    )
+    a.add_argument(
+        "--dropout",
+        choices=("nan", "hold"),
+        default="nan",
+        help="a sensor missing from a frame: nan (its joints unknown) or hold its last orientation",
+    )
+    a.add_argument(
+        "--max-hold-s",
+        type=float,
+        default=0.5,
+        help="with --dropout hold: how long a missing sensor is held [s]",
+    )
     a.add_argument("--start", type=float, help="ignore samples before this time [s]")
     a.add_argument("--stop", type=float, help="ignore samples after this time [s]")
     a.add_argument("-o", "--output", help="joint angles .mot")

@@ -37,7 +37,12 @@ def register(sub: Any) -> None:
     ros.add_argument("-o", "--output", required=True, help="the bag directory to create")
     ros.add_argument("--filter", default=None, help="add orientations from this filter (IMU)")
     ros.add_argument("--mode", choices=["9d", "6d"], default="9d", help="filter mode")
-    ros.add_argument("--storage", choices=["sqlite3", "mcap"], default="sqlite3")
+    ros.add_argument(
+        "--storage",
+        choices=["sqlite3", "mcap"],
+        default="sqlite3",
+        help="rosbag2 storage: sqlite3 (default) or mcap",
+    )
     ros.add_argument("--json", action="store_true", help="print one JSON summary")
     ros.set_defaults(func=_ros2)
 

@@ -64,10 +64,29 @@ def register(sub: Any) -> None:
         formatter_class=raw,
     )
     ev.add_argument("directory", type=Path, help="directory of BROAD .hdf5 trials")
-    ev.add_argument("--filter", required=True, choices=names, dest="filter_name")
-    ev.add_argument("--mode", choices=["9d", "6d"], default="9d")
-    ev.add_argument("--backend", choices=["fast", "reference"], default="fast")
-    ev.add_argument("--param", type=_param, action="append", default=[], metavar="NAME=VALUE")
+    ev.add_argument(
+        "--filter", required=True, choices=names, dest="filter_name", help="orientation filter"
+    )
+    ev.add_argument(
+        "--mode",
+        choices=["9d", "6d"],
+        default="9d",
+        help="9d (with the magnetometer, default) or 6d",
+    )
+    ev.add_argument(
+        "--backend",
+        choices=["fast", "reference"],
+        default="fast",
+        help="fast (numba, default) or reference (readable numpy)",
+    )
+    ev.add_argument(
+        "--param",
+        type=_param,
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a filter parameter, e.g. tau_acc=2.0 (repeatable)",
+    )
     ev.add_argument(
         "--remove-gyr-bias",
         action="store_true",
@@ -93,13 +112,39 @@ def register(sub: Any) -> None:
         "-o device.sto",
         formatter_class=raw,
     )
-    run.add_argument("path", type=Path)
-    run.add_argument("--filter", required=True, choices=[*names, DEVICE], dest="filter_name")
+    run.add_argument(
+        "path",
+        type=Path,
+        help="a recording: mocapkit CSV, BROAD .hdf5, x-IMU3 or Xsens export (file or directory)",
+    )
+    run.add_argument(
+        "--filter",
+        required=True,
+        choices=[*names, DEVICE],
+        dest="filter_name",
+        help="orientation filter",
+    )
     run.add_argument("-o", "--output", type=Path, required=True, help="output .sto file")
-    run.add_argument("--mode", choices=["9d", "6d"], default="9d")
+    run.add_argument(
+        "--mode",
+        choices=["9d", "6d"],
+        default="9d",
+        help="9d (with the magnetometer, default) or 6d",
+    )
     run.add_argument("--sensor", action="append", default=[], help="only this sensor")
-    run.add_argument("--param", type=_param, action="append", default=[], metavar="NAME=VALUE")
-    run.add_argument("--remove-gyr-bias", action="store_true")
+    run.add_argument(
+        "--param",
+        type=_param,
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a filter parameter, e.g. tau_acc=2.0 (repeatable)",
+    )
+    run.add_argument(
+        "--remove-gyr-bias",
+        action="store_true",
+        help="subtract the gyroscope bias measured over the first rest period",
+    )
     run.add_argument(
         "--offline",
         action="store_true",
@@ -116,12 +161,26 @@ def register(sub: Any) -> None:
         "  mocapkit imu calibrate-mag export_dir --sensor 'Left Foot' -o left_foot_cal.csv",
         formatter_class=raw,
     )
-    cal.add_argument("path", type=Path)
-    cal.add_argument("--sensor", action="append", default=[])
-    cal.add_argument("--model", choices=["ellipsoid", "sphere"], default="ellipsoid")
-    cal.add_argument("--field-strength", type=float, default=None)
+    cal.add_argument(
+        "path",
+        type=Path,
+        help="a recording: mocapkit CSV, BROAD .hdf5, x-IMU3 or Xsens export (file or directory)",
+    )
+    cal.add_argument("--sensor", action="append", default=[], help="only this sensor (repeatable)")
+    cal.add_argument(
+        "--model",
+        choices=["ellipsoid", "sphere"],
+        default="ellipsoid",
+        help="ellipsoid (hard and soft iron, default) or sphere (hard iron only)",
+    )
+    cal.add_argument(
+        "--field-strength",
+        type=float,
+        default=None,
+        help="the local field's magnitude in the readings' unit (default: fitted)",
+    )
     cal.add_argument("-o", "--output", type=Path, default=None, help="calibrated .csv")
-    cal.add_argument("--json", action="store_true")
+    cal.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     cal.set_defaults(func=_calibrate_mag)
 
 

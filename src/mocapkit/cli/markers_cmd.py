@@ -216,9 +216,14 @@ def register(subparsers: Any) -> None:
         "inspect", help="markers, frames, units, gaps of a marker file",
         epilog=_EX_INSPECT, formatter_class=raw,
     )  # fmt: skip
-    ins.add_argument("file", type=Path)
-    ins.add_argument("--units", choices=("auto", "mm", "cm", "m"), default="auto")
-    ins.add_argument("--json", action="store_true")
+    ins.add_argument("file", type=Path, help="a marker file (.c3d or .trc)")
+    ins.add_argument(
+        "--units",
+        choices=("auto", "mm", "cm", "m"),
+        default="auto",
+        help="override the file's length unit (mm, cm, m)",
+    )
+    ins.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     ins.set_defaults(func=_inspect)
     parser.set_defaults(func=lambda a: parser.print_help() or 2)
 

@@ -41,14 +41,23 @@ def register(sub: Any) -> None:
     s = ss.add_parser(
         "simulate", help="stream a simulated suit", epilog=_EPILOG, formatter_class=fmt
     )
-    s.add_argument("--host", default="127.0.0.1")
+    s.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address (receive: to listen on; simulate and replay: to send to)",
+    )
     s.add_argument("--port", type=port, default=9000, help="UDP port of the receiver")
     s.add_argument("--serial-port", help="send over this serial device instead of UDP")
     s.add_argument("--baud", type=int, default=921_600, help="serial line speed [bit/s]")
     s.add_argument("--sensors", type=int, default=15, help="number of sensors, 1..15")
     s.add_argument("--rate-hz", type=float, default=100.0, help="IMU sampling rate [Hz]")
     s.add_argument("--seconds", type=float, default=10.0, help="length of the motion [s]")
-    s.add_argument("--motion", default="walk", choices=["walk", "wave", "static"])
+    s.add_argument(
+        "--motion",
+        default="walk",
+        choices=["walk", "wave", "static"],
+        help="the simulated body motion",
+    )
     s.add_argument(
         "--mode",
         default="raw",
@@ -65,11 +74,18 @@ def register(sub: Any) -> None:
         "orientation mode, 95%% of the radio's highest rate)",
     )
     s.add_argument("--radio", action="store_true", help="send through the paper's radio model")
-    s.add_argument("--radio-bps", type=float, default=33_600.0)
+    s.add_argument(
+        "--radio-bps",
+        type=float,
+        default=33_600.0,
+        help="the radio link's bit rate [bit/s] (the paper's: 33,600)",
+    )
     s.add_argument("--loss", type=float, default=0.0, help="radio packet loss probability")
     s.add_argument("--reorder", type=float, default=0.0, help="radio reordering probability")
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--json", action="store_true")
+    s.add_argument(
+        "--seed", type=int, default=0, help="random seed of the simulated noise and losses"
+    )
+    s.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     s.set_defaults(func=_simulate)
 
     for name, helptext in (
@@ -77,12 +93,21 @@ def register(sub: Any) -> None:
         ("record", "receive and record to MCAP"),
     ):
         r = ss.add_parser(name, help=helptext, epilog=_EPILOG, formatter_class=fmt)
-        r.add_argument("--host", default="0.0.0.0")
-        r.add_argument("--port", type=port, default=9000)
+        r.add_argument(
+            "--host",
+            default="0.0.0.0",
+            help="address (receive: to listen on; simulate and replay: to send to)",
+        )
+        r.add_argument("--port", type=port, default=9000, help="UDP port")
         r.add_argument("--serial-port", help="receive from this serial device instead of UDP")
         r.add_argument("--baud", type=int, default=921_600, help="serial line speed [bit/s]")
         r.add_argument("--seconds", type=float, help="stop after this long (default: Ctrl-C)")
-        r.add_argument("--protocols", default="auto", choices=["auto", "suit", "slimevr"])
+        r.add_argument(
+            "--protocols",
+            default="auto",
+            choices=["auto", "suit", "slimevr"],
+            help="which wire protocols to accept: suit, slimevr or auto (by the first byte)",
+        )
         r.add_argument("--json", action="store_true", help="print one JSON summary at the end")
         r.add_argument(
             "--samples",
@@ -100,33 +125,37 @@ def register(sub: Any) -> None:
     rp = ss.add_parser(
         "replay", help="send a recording again, byte for byte", epilog=_EPILOG, formatter_class=fmt
     )
-    rp.add_argument("recording")
-    rp.add_argument("--host", default="127.0.0.1")
-    rp.add_argument("--port", type=port, default=9000)
+    rp.add_argument("recording", help="an MCAP recording written by 'suit record'")
+    rp.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="address (receive: to listen on; simulate and replay: to send to)",
+    )
+    rp.add_argument("--port", type=port, default=9000, help="UDP port")
     rp.add_argument("--speed", type=float, default=1.0, help="1 real time, 0 as fast as possible")
-    rp.add_argument("--json", action="store_true")
+    rp.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     rp.set_defaults(func=_replay)
 
     d = ss.add_parser(
         "decode", help="batch-decode a recording", epilog=_EPILOG, formatter_class=fmt
     )
-    d.add_argument("recording")
-    d.add_argument("--json", action="store_true")
+    d.add_argument("recording", help="an MCAP recording written by 'suit record'")
+    d.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     d.set_defaults(func=_decode)
 
     b = ss.add_parser(
         "bench", help="simulator -> loopback UDP -> receiver", epilog=_EPILOG, formatter_class=fmt
     )
-    b.add_argument("--sensors", type=int, default=15)
-    b.add_argument("--rate-hz", type=float, default=1000.0)
-    b.add_argument("--seconds", type=float, default=10.0)
+    b.add_argument("--sensors", type=int, default=15, help="number of sensors")
+    b.add_argument("--rate-hz", type=float, default=1000.0, help="sample rate per sensor [Hz]")
+    b.add_argument("--seconds", type=float, default=10.0, help="how long [s]")
     b.add_argument(
         "--sender",
         default="process",
         choices=["process", "thread"],
         help="run the simulator in its own process (default) or in a thread of this one",
     )
-    b.add_argument("--json", action="store_true")
+    b.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     b.set_defaults(func=_bench)
 
     t = ss.add_parser(
@@ -135,8 +164,8 @@ def register(sub: Any) -> None:
         epilog=_EPILOG,
         formatter_class=fmt,
     )
-    t.add_argument("--bps", type=float, default=33_600.0)
-    t.add_argument("--json", action="store_true")
+    t.add_argument("--bps", type=float, default=33_600.0, help="radio bit rate [bit/s]")
+    t.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     t.set_defaults(func=_radio_table)
 
 

@@ -40,7 +40,12 @@ def _pipeline_args(p: argparse.ArgumentParser) -> None:
         choices=["node", "host"],
         help="node: orientations fused on the sensor nodes (default); host: RAW samples fused here",
     )
-    p.add_argument("--filter", default="miller", choices=available_filters())
+    p.add_argument(
+        "--filter",
+        default="miller",
+        choices=available_filters(),
+        help="host-side orientation filter (default: the most accurate for the chain)",
+    )
     p.add_argument("--latency-ms", type=float, default=30.0, help="robot actuation latency")
 
 
@@ -60,7 +65,12 @@ def register(sub: Any) -> None:
         epilog="example: mocapkit teleop evaluate --shape infinity --json",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    ev.add_argument("--shape", default="circle", choices=[*_SHAPES, "all"])
+    ev.add_argument(
+        "--shape",
+        default="circle",
+        choices=[*_SHAPES, "all"],
+        help="the shape(s) to trace (default: all six)",
+    )
     ev.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     ev.add_argument(
         "--chain",
@@ -135,8 +145,10 @@ def register(sub: Any) -> None:
     pb.add_argument("recording", type=Path, help="MCAP file with /teleop/command")
     pb.add_argument("--server", default="127.0.0.1:9870", help="robot server HOST:PORT")
     pb.add_argument("--seconds", type=float, default=10.0, help="how long to play")
-    pb.add_argument("--rate-hz", type=float, default=100.0)
-    pb.add_argument("--json", action="store_true")
+    pb.add_argument(
+        "--rate-hz", type=float, default=100.0, help="command rate of the playback [Hz]"
+    )
+    pb.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     pb.set_defaults(func=_playback)
 
 

@@ -305,13 +305,42 @@ def config_args(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("--port", type=port, default=9870, help="UDP port (0: any free port)")
     parser.add_argument("--robot", default=d.robot, help="robot arm name")
-    parser.add_argument("--rate-hz", type=float, default=d.rate_hz)
-    parser.add_argument("--report-hz", type=float, default=d.report_hz)
-    parser.add_argument("--latency-ms", type=float, default=d.latency_s * 1e3)
-    parser.add_argument("--gate-mm", type=float, default=d.gate_pos_m * 1e3)
-    parser.add_argument("--gate-deg", type=float, default=float(np.degrees(d.gate_rot_rad)))
-    parser.add_argument("--command-timeout-s", type=float, default=d.command_timeout_s)
-    parser.add_argument("--velocity-scale", type=float, default=d.velocity_scale)
+    parser.add_argument(
+        "--rate-hz", type=float, default=d.rate_hz, help="the robot's control rate [Hz]"
+    )
+    parser.add_argument(
+        "--report-hz", type=float, default=d.report_hz, help="pose reports sent back per second"
+    )
+    parser.add_argument(
+        "--latency-ms",
+        type=float,
+        default=d.latency_s * 1e3,
+        help="simulated actuation latency [ms]",
+    )
+    parser.add_argument(
+        "--gate-mm",
+        type=float,
+        default=d.gate_pos_m * 1e3,
+        help="safety gate: a command farther than this from the actual pose is refused [mm]",
+    )
+    parser.add_argument(
+        "--gate-deg",
+        type=float,
+        default=float(np.degrees(d.gate_rot_rad)),
+        help="safety gate: the same for rotation [deg]",
+    )
+    parser.add_argument(
+        "--command-timeout-s",
+        type=float,
+        default=d.command_timeout_s,
+        help="no command for this long: the robot holds [s]",
+    )
+    parser.add_argument(
+        "--velocity-scale",
+        type=float,
+        default=d.velocity_scale,
+        help="fraction of the arm's joint velocity limits the robot may use",
+    )
     parser.add_argument(
         "--q-start-deg",
         default=None,
