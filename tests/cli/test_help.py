@@ -97,9 +97,11 @@ def test_every_option_has_help() -> None:
             if isinstance(action, argparse._SubParsersAction):
                 for name, sub in action.choices.items():
                     walk(sub, f"{path} {name}")
-            elif not isinstance(action, (argparse._HelpAction, argparse._VersionAction)):
-                if not action.help:
-                    missing.append(f"{path} {'/'.join(action.option_strings) or action.dest}")
+            elif (
+                not isinstance(action, (argparse._HelpAction, argparse._VersionAction))
+                and not action.help
+            ):
+                missing.append(f"{path} {'/'.join(action.option_strings) or action.dest}")
 
     walk(build_parser(every=True), "mocapkit")
     assert missing == []
