@@ -6,7 +6,22 @@ Conventions (docs/conventions.md): quaternions are Hamilton ``[w, x, y, z]``;
 first axis.
 """
 
+from typing import Any
+
 from mocapkit.errors import MocapkitError
 
 __version__ = "0.1.0"
-__all__ = ["MocapkitError", "__version__"]
+
+# The common path (mocapkit.api), imported on first use so `import mocapkit` stays light.
+_API = ("Reconstruction", "make_filter", "read_c3d", "read_imu", "read_trc", "reconstruct")
+
+
+def __getattr__(name: str) -> Any:
+    if name in _API:
+        from mocapkit import api
+
+        return getattr(api, name)
+    raise AttributeError(f"module 'mocapkit' has no attribute {name!r}")
+
+
+__all__ = ["MocapkitError", "__version__", *_API]

@@ -310,6 +310,30 @@ class JointAngleSeries:
             )
         return self.values[:, self.names.index(name)]
 
+    def unit(self, name: str) -> str:
+        """``"m"`` for a translational coordinate (``*_tx``, ``*_ty``, ``*_tz``), else
+        ``"rad"``."""
+        return "m" if name.endswith(("_tx", "_ty", "_tz")) else "rad"
+
+    def to_dataframe(self, degrees: bool = False) -> Any:
+        """A pandas DataFrame indexed by ``time_s``, one column per coordinate with its
+        unit in the name (``knee_angle_r_rad``, ``pelvis_tx_m``; ``_deg`` with
+        ``degrees``). Needs pandas."""
+        try:
+            import pandas as pd
+        except ImportError as exc:
+            from mocapkit.errors import MissingDependencyError
+
+            raise MissingDependencyError("to_dataframe needs pandas: pip install pandas") from exc
+        columns = {}
+        for k, n in enumerate(self.names):
+            unit = self.unit(n)
+            values = self.values[:, k]
+            if degrees and unit == "rad":
+                unit, values = "deg", np.degrees(values)
+            columns[f"{n}_{unit}"] = values
+        return pd.DataFrame(columns, index=pd.Index(self.time, name="time_s"))
+
     @property
     def n_samples(self) -> int:
         return int(self.time.shape[0])
