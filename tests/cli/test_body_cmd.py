@@ -93,3 +93,25 @@ def test_angles_on_the_ximu3_directory_with_a_filter(
     assert main(["body", "angles", str(shared_data / "opensense" / "walking_orientations.sto"),
                  "--preset", "opensense", "--filter", "miller"]) == 1  # fmt: skip
     assert "has no raw samples to filter" in capsys.readouterr().err
+
+
+@pytest.mark.shared_data
+def test_raw_samples_through_a_6d_filter_report_what_no_human_does(
+    shared_data: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The 15-IMU recording's raw samples through polaris 6D: each sensor's heading
+    drifts on its own, and joints come out no human reaches (a forearm pronated 250 deg).
+    Before, exit 0 and nothing said; now each such coordinate is named with its sensor."""
+    import warnings
+
+    from mocapkit.body.plausibility import ImplausibleAnglesWarning
+
+    rec = shared_data / "full-body-15-imu" / "full_body_example_data.mat"
+    argv = ["body", "angles", str(rec), "--filter", "polaris", "--mode", "6d"]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert main([*argv, "--start", "40.3", "--json"]) == 0
+    said = [str(w.message) for w in caught if w.category is ImplausibleAnglesWarning]
+    assert any(m.startswith("pro_sup_r (segment radius_r, sensor forearm_right)") for m in said)
+    found = {f["coordinate"] for f in json.loads(capsys.readouterr().out)["implausible"]}
+    assert {"pro_sup_r", "pro_sup_l"} <= found

@@ -21,6 +21,7 @@ from mocapkit.body.calibration import (
 from mocapkit.body.functional import calibrate_functional
 from mocapkit.body.joint_angles import BodyAngles
 from mocapkit.body.kinematics import body_angles
+from mocapkit.body.plausibility import Finding, warn_implausible
 from mocapkit.body.sensor_tree import SensorTree
 from mocapkit.body.timebase import align_orientations
 from mocapkit.errors import ConfigError, DataError
@@ -34,6 +35,7 @@ class BodyResult:
     calibration: BodyCalibration
     body: BodyAngles
     segments: dict[str, OrientationSeries]
+    implausible: tuple[Finding, ...] = ()
 
 
 def crop(
@@ -131,7 +133,8 @@ def run_body(
     body, segments = body_angles(
         tree, cal, use, dropout=dropout, max_hold_s=max_hold_s, backend=backend
     )
-    return BodyResult(cal, body, segments)
+    findings = warn_implausible(tree, body.angles)  # never written silently
+    return BodyResult(cal, body, segments, tuple(findings))
 
 
 def summary(result: BodyResult) -> dict[str, Any]:
@@ -162,4 +165,15 @@ def summary(result: BodyResult) -> dict[str, Any]:
         "near_gimbal": dict(result.body.near_gimbal),
         "held": dict(result.body.held),
         "coordinates": coords,
+        "implausible": [
+            {
+                "coordinate": f.coordinate,
+                "segment": f.segment,
+                "sensor": f.sensor,
+                "outside_fraction": round(f.outside_fraction, 3),
+                "worst_deg": round(f.worst_deg, 1),
+                "range_deg": list(f.range_deg),
+            }
+            for f in result.implausible
+        ],
     }
