@@ -192,3 +192,22 @@ def test_run_holds_and_names_a_time_gap(tmp_path: Path) -> None:
         assert (
             main(["imu", "run", str(src), "--filter", "polaris", "--offline", "-o", str(out2)]) == 0
         )
+
+
+def test_run_output_follows_the_extension(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    src = _csv_recording(tmp_path)
+    out = tmp_path / "q.csv"
+    argv = ["imu", "run", str(src), "--filter", "miller", "-o", str(out), "--json"]
+    assert main(argv) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert (summary["rows"], summary["sensors"]) == (200, ["thigh_imu"])
+    table = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert (
+        out.read_text().splitlines()[0] == "time_s,thigh_imu_w,thigh_imu_x,thigh_imu_y,thigh_imu_z"
+    )
+    assert table.shape == (200, 5)
+    np.testing.assert_allclose(np.linalg.norm(table[:, 1:], axis=1), 1.0, atol=1e-9)
+    assert main(["imu", "run", str(src), "--filter", "miller", "-o", str(tmp_path / "q.txt")]) == 1
+    assert "the output format follows the extension" in capsys.readouterr().err

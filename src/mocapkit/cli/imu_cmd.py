@@ -124,7 +124,13 @@ def register(sub: Any) -> None:
         dest="filter_name",
         help="orientation filter",
     )
-    run.add_argument("-o", "--output", type=Path, required=True, help="output .sto file")
+    run.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        required=True,
+        help="output: .sto or .mot (OpenSense quaternion table) or .csv (time_s, <sensor>_w..z)",
+    )
     run.add_argument(
         "--mode",
         choices=["9d", "6d"],
@@ -150,6 +156,7 @@ def register(sub: Any) -> None:
         action="store_true",
         help="the filter's offline mode (forward-backward over the whole recording; polaris)",
     )
+    run.add_argument("--json", action="store_true", help="print one JSON summary on stdout")
     run.set_defaults(func=_run)
 
     cal = cmds.add_parser(
@@ -255,6 +262,11 @@ def _run(args: argparse.Namespace) -> int:
     from mocapkit.io.opensim_table import write_table
     from mocapkit.series import OrientationSeries
 
+    if args.output.suffix.lower() not in (".sto", ".mot", ".csv"):
+        raise ConfigError(
+            f"-o {args.output}: the output format follows the extension: .sto or .mot "
+            "(OpenSense quaternion table) or .csv"
+        )
     series: dict[str, OrientationSeries] = {}
     if args.filter_name == DEVICE:
         series = _select(read_device_orientations(args.path), args.sensor, args.path)
@@ -292,9 +304,24 @@ def _run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     labels = ["_".join(name.split()) for name in series]
-    write_table(args.output, time - time[0], labels, quats, name=args.path.stem)
+    if args.output.suffix.lower() == ".csv":
+        _write_quat_csv(args.output, time - time[0], labels, quats)
+    else:
+        write_table(args.output, time - time[0], labels, quats, name=args.path.stem)
     print(f"wrote {args.output} ({len(time)} rows, sensors: {', '.join(labels)})", file=sys.stderr)
+    if args.json:
+        print_json(
+            {"output": str(args.output), "rows": len(time), "sensors": labels,
+             "filter": args.filter_name, "mode": args.mode, "offline": args.offline}
+        )  # fmt: skip
     return EXIT_OK
+
+
+def _write_quat_csv(path: Path, time: Any, labels: list[str], quats: Any) -> None:
+    """A plain CSV: ``time_s`` then ``<sensor>_w, _x, _y, _z`` per sensor (q_world_sensor)."""
+    header = ["time_s"] + [f"{s}_{c}" for s in labels for c in "wxyz"]
+    table = np.column_stack([time, quats.reshape(len(time), -1)])
+    np.savetxt(path, table, delimiter=",", header=",".join(header), comments="", fmt="%.10g")
 
 
 def _steps(rec: Any, nominal: float) -> Any:
