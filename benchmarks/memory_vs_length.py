@@ -1,0 +1,91 @@
+"""Time and peak memory of whole commands against recording length (issue 16).
+
+    python -m benchmarks.memory_vs_length [--minutes 1 10 60] [--write-docs]
+
+A one-sensor IMU recording at 100 Hz (a mocapkit CSV of a smooth motion with
+consumer-grade noise) of each length is run through ``mocapkit imu run --filter
+polaris`` online and ``--offline``, as whole processes; reported: wall time and the
+child's peak resident memory (``getrusage(RUSAGE_CHILDREN)``, the maximum of the run
+that just finished, each run in its own fresh parent so the maximum is that run's).
+Target (issue 16): peak memory within 2x from 1 min to 1 h.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks._docs import write_section
+
+_MEASURE = """
+import resource, subprocess, sys, time, json
+t0 = time.perf_counter()
+subprocess.run(sys.argv[1:], check=True, capture_output=True)
+print(json.dumps({"seconds": time.perf_counter() - t0,
+                  "peak_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024}))
+"""
+
+
+def make_recording(path: Path, minutes: float) -> None:
+    from mocapkit.io.imu_csv import write_imu_csv
+    from mocapkit.series import ImuRecording
+
+    n = round(minutes * 60 * 100)
+    t = np.arange(n) / 100.0
+    rng = np.random.default_rng(0)
+    gyr = np.column_stack([np.sin(0.7 * t), np.sin(1.1 * t), np.sin(0.3 * t)])
+    gyr = gyr + 0.01 * rng.normal(size=(n, 3))
+    acc = np.tile([0.0, 0.0, 9.81], (n, 1)) + 0.05 * rng.normal(size=(n, 3))
+    mag = np.tile([0.0, 20.0, -40.0], (n, 1)) + 0.3 * rng.normal(size=(n, 3))
+    write_imu_csv(path, ImuRecording(t, gyr, acc, mag, name="s"))
+
+
+def measure(argv: list[str]) -> dict[str, float]:
+    out = subprocess.run(
+        [sys.executable, "-c", _MEASURE, *argv], capture_output=True, text=True, check=True
+    )
+    return json.loads(out.stdout)  # type: ignore[no-any-return]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, nargs="+", default=[1.0, 10.0, 60.0])
+    parser.add_argument("--write-docs", action="store_true")
+    args = parser.parse_args()
+    exe = [sys.executable, "-c", "from mocapkit.cli.main import run; run()"]
+    rows = []
+    with tempfile.TemporaryDirectory() as d:
+        for minutes in args.minutes:
+            src = Path(d) / f"rec_{minutes:g}min.csv"
+            make_recording(src, minutes)
+            for offline in (False, True):
+                out = str(Path(d) / "out.sto")
+                argv = [*exe, "imu", "run", str(src), "--filter", "polaris", "-o", out]
+                argv += ["--offline"] if offline else []
+                m = measure(argv)
+                rows.append((minutes, "offline" if offline else "online", m))
+                print(minutes, offline, m, flush=True)
+    lines = ["| length | mode | whole process [s] | peak memory [MB] |", "|---:|---|---:|---:|"]
+    for minutes, mode, m in rows:
+        lines.append(f"| {minutes:g} min | {mode} | {m['seconds']:.2f} | {m['peak_mb']:.0f} |")
+    first = {mode: m["peak_mb"] for mn, mode, m in rows if mn == args.minutes[0]}
+    last = {mode: m["peak_mb"] for mn, mode, m in rows if mn == args.minutes[-1]}
+    growth = ", ".join(f"{mode} x{last[mode] / first[mode]:.1f}" for mode in first)
+    text = (
+        "`python -m benchmarks.memory_vs_length` (one sensor at 100 Hz, a mocapkit CSV, "
+        "`mocapkit imu run --filter polaris`, whole processes). Peak memory from the "
+        f"shortest to the longest recording: {growth} (target: within x2).\n\n" + "\n".join(lines)
+    )
+    print(text)
+    if args.write_docs:
+        write_section("Memory and time against recording length", text)
+
+
+if __name__ == "__main__":
+    main()
