@@ -44,8 +44,10 @@ def test_output_equal_to_the_input_is_refused_and_the_input_kept(
 def test_a_directory_where_a_file_is_expected(
     recording: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert main(["imu", "run", str(recording), "--filter", "miller", "-o", str(tmp_path)]) == 1
-    assert f"{tmp_path}: this is a directory, a file is expected here" in _err(capsys)
+    folder = tmp_path / "out.sto"  # a directory with a file's name
+    folder.mkdir()
+    assert main(["imu", "run", str(recording), "--filter", "miller", "-o", str(folder)]) == 1
+    assert f"{folder}: this is a directory, a file is expected here" in _err(capsys)
 
 
 def test_the_parent_of_the_output_is_a_file(
