@@ -140,6 +140,9 @@ def plan(
             skipped.append(src)
             continue
         tasks.append(Task(str(src), str(out), [*argv(str(src), str(out)), *extra]))
+    # largest first: the long files start early and the short ones fill the gaps at the
+    # end, so no worker idles while another finishes a long file alone
+    tasks.sort(key=lambda t: -Path(t.input).stat().st_size if Path(t.input).exists() else 0)
     return tasks, skipped
 
 
