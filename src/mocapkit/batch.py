@@ -205,11 +205,12 @@ def _ray(tasks: list[Task], workers: int, address: str | None) -> Iterator[dict[
         ) from exc
     started = False
     if not ray.is_initialized():
-        env = {"env_vars": {name: "1" for name in _ONE_THREAD}}
-        kwargs: dict[str, Any] = {"runtime_env": env, "log_to_driver": False}
-        if address:
-            ray.init(address=address, **kwargs)
-        else:
+        kwargs: dict[str, Any] = {"log_to_driver": False}
+        if address:  # a remote cluster's workers get the thread limits with the job
+            env = {"env_vars": {name: "1" for name in _ONE_THREAD}}
+            ray.init(address=address, runtime_env=env, **kwargs)
+        else:  # a local cluster's workers inherit this environment (no per-job runtime
+            _one_thread_env()  # environment to build: that cost 0.1 s a file)
             ray.init(num_cpus=workers, include_dashboard=False, **kwargs)
         started = True
     try:
