@@ -57,11 +57,9 @@ def _batch(args: argparse.Namespace) -> int:
         cut = inputs.index("--")
         inputs, extra = inputs[:cut], inputs[cut + 1 :]
     extra += list(getattr(args, "extra", []) or [])
-    done: list[dict[str, Any]] = []
     with StepProgress() as bars:
 
         def report(row: dict[str, Any], n_done: int, n_total: int) -> None:
-            done.append(row)
             bars(f"batch {args.kind}", n_done, n_total)
             if not row["ok"] and not args.json:
                 print(f"mocapkit batch: {row['input']}: {row['error']}", file=sys.stderr)

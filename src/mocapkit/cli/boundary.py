@@ -129,6 +129,16 @@ def check_outputs_are_not_inputs(args: argparse.Namespace) -> None:
         seen[key] = out_name
 
 
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` is this machine's loopback (127.0.0.0/8, ::1, ``localhost``)."""
+    import ipaddress
+
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return host == "localhost"
+
+
 def port(text: str) -> int:
     """argparse type of a UDP/TCP port: an integer 0..65535 (0: any free port)."""
     try:

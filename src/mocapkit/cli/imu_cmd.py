@@ -68,35 +68,12 @@ def register(sub: Any) -> None:
         "--filter", required=True, choices=names, dest="filter_name", help="orientation filter"
     )
     ev.add_argument(
-        "--mode",
-        choices=["9d", "6d"],
-        default="9d",
-        help="9d (with the magnetometer, default) or 6d",
-    )
-    ev.add_argument(
         "--backend",
         choices=["fast", "reference"],
         default="fast",
         help="fast (numba, default) or reference (readable numpy)",
     )
-    ev.add_argument(
-        "--param",
-        type=_param,
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="a filter parameter, e.g. tau_acc=2.0 (repeatable)",
-    )
-    ev.add_argument(
-        "--remove-gyr-bias",
-        action="store_true",
-        help="subtract the gyroscope bias measured over each trial's first rest period",
-    )
-    ev.add_argument(
-        "--offline",
-        action="store_true",
-        help="the filter's offline mode (forward-backward over the whole trial; polaris)",
-    )
+    _filter_options(ev, "each trial")
     ev.add_argument("--json", action="store_true", help="print one JSON object")
     ev.set_defaults(func=_evaluate)
 
@@ -131,31 +108,8 @@ def register(sub: Any) -> None:
         required=True,
         help="output: .sto or .mot (OpenSense quaternion table) or .csv (time_s, <sensor>_w..z)",
     )
-    run.add_argument(
-        "--mode",
-        choices=["9d", "6d"],
-        default="9d",
-        help="9d (with the magnetometer, default) or 6d",
-    )
     run.add_argument("--sensor", action="append", default=[], help="only this sensor")
-    run.add_argument(
-        "--param",
-        type=_param,
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="a filter parameter, e.g. tau_acc=2.0 (repeatable)",
-    )
-    run.add_argument(
-        "--remove-gyr-bias",
-        action="store_true",
-        help="subtract the gyroscope bias measured over the first rest period",
-    )
-    run.add_argument(
-        "--offline",
-        action="store_true",
-        help="the filter's offline mode (forward-backward over the whole recording; polaris)",
-    )
+    _filter_options(run, "the recording")
     run.add_argument("--json", action="store_true", help="print one JSON summary on stdout")
     run.set_defaults(func=_run)
 
@@ -189,6 +143,34 @@ def register(sub: Any) -> None:
     cal.add_argument("-o", "--output", type=Path, default=None, help="calibrated .csv")
     cal.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     cal.set_defaults(func=_calibrate_mag)
+
+
+def _filter_options(p: Any, what: str) -> None:
+    """The options of how a filter runs, shared by ``evaluate`` and ``run``."""
+    p.add_argument(
+        "--mode",
+        choices=["9d", "6d"],
+        default="9d",
+        help="9d (with the magnetometer, default) or 6d",
+    )
+    p.add_argument(
+        "--param",
+        type=_param,
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a filter parameter, e.g. tau_acc=2.0 (repeatable)",
+    )
+    p.add_argument(
+        "--remove-gyr-bias",
+        action="store_true",
+        help=f"subtract the gyroscope bias measured over {what}'s first rest period",
+    )
+    p.add_argument(
+        "--offline",
+        action="store_true",
+        help=f"the filter's offline mode (forward-backward over {what}; polaris)",
+    )
 
 
 def _bias_remover(enabled: bool) -> Any:
@@ -257,6 +239,7 @@ def _select(items: dict[str, Any], wanted: list[str], path: Path) -> dict[str, A
 def _run(args: argparse.Namespace) -> int:
     from mocapkit.imu.evaluation import check_offline
     from mocapkit.imu.filters import make_filter
+    from mocapkit.imu.filters.base import recording_steps
     from mocapkit.imu.resample import common_time_base, resample_orientation
     from mocapkit.io.imu_files import read_device_orientations, read_imu_recordings
     from mocapkit.io.opensim_table import write_table
@@ -279,7 +262,7 @@ def _run(args: argparse.Namespace) -> int:
             if args.offline:
                 mag = rec.mag if args.mode == "9d" else None
                 q = check_offline(filt, args.filter_name).run_offline(
-                    rec.gyr, rec.acc, mag, dt=_steps(rec, filt.params.dt)
+                    rec.gyr, rec.acc, mag, dt=recording_steps(rec, filt.params.dt)
                 )
                 series[name] = OrientationSeries(rec.time, q, name=rec.name)
                 continue
@@ -322,13 +305,6 @@ def _write_quat_csv(path: Path, time: Any, labels: list[str], quats: Any) -> Non
     header = ["time_s"] + [f"{s}_{c}" for s in labels for c in "wxyz"]
     table = np.column_stack([time, quats.reshape(len(time), -1)])
     np.savetxt(path, table, delimiter=",", header=",".join(header), comments="", fmt="%.10g")
-
-
-def _steps(rec: Any, nominal: float) -> Any:
-    """Per-sample time steps of a recording (the first one nominal), as ``run_recording``."""
-    if rec.n_samples < 2:
-        return None
-    return np.concatenate([[nominal], np.diff(rec.time)])
 
 
 def _calibrate_mag(args: argparse.Namespace) -> int:

@@ -126,7 +126,13 @@ def check_structure(path: Path) -> None:
     ezc3d (native code) crashes the whole process on a damaged parameter section
     (found by fuzzing), where a clear error is owed. Raises FileFormatError naming the
     byte; a sane file passes untouched (the data section is left to ezc3d)."""
-    data = path.read_bytes()
+    with path.open("rb") as f:  # the header, then only the parameter section
+        data = f.read(512)
+        if len(data) == 512 and data[0] >= 2:
+            f.seek(512 * (data[0] - 1))
+            head = f.read(4)
+            n_blocks = head[2] if len(head) == 4 else 1
+            data = data + bytes(512 * (data[0] - 2)) + head + f.read(512 * max(1, n_blocks) - 4)
 
     def bad(where: int, what: str) -> FileFormatError:
         return FileFormatError(

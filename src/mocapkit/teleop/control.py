@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import hashlib
 import hmac
-import ipaddress
 import json
 import logging
 import socket
@@ -39,6 +38,7 @@ import threading
 from collections.abc import Callable
 from typing import IO, Any
 
+from mocapkit.cli.boundary import is_loopback
 from mocapkit.errors import ConfigError, MocapkitError
 from mocapkit.teleop.live import LiveSession
 
@@ -112,7 +112,7 @@ class ControlSocket:
     def __init__(
         self, controls: Controls, host: str = "127.0.0.1", port: int = 0, key: bytes | None = None
     ) -> None:
-        if key is None and not _is_loopback(host):
+        if key is None and not is_loopback(host):
             raise ConfigError(
                 f"control host {host}: the control socket steers a robot; off loopback it "
                 "needs a shared key (signed datagrams), or bind it to 127.0.0.1"
@@ -190,13 +190,6 @@ class ControlSocket:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
-
-
-def _is_loopback(host: str) -> bool:
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return host == "localhost"
 
 
 def sign(key: bytes, seq: int, command: str) -> bytes:

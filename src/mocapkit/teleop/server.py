@@ -383,8 +383,10 @@ def _q_start(text: str | None) -> tuple[float, ...] | None:
 
 def run_from_args(args: argparse.Namespace, parent_pid: int | None = None) -> int:
     """Bind, print ``READY <port>`` on stdout, serve."""
+    from mocapkit.cli.boundary import is_loopback
+
     key = read_key(args.key_file)
-    if key is None and not _is_loopback(args.host):
+    if key is None and not is_loopback(args.host):
         raise ConfigError(
             f"--host {args.host}: the robot port moves a robot; off loopback it needs a shared "
             "key (--key-file, the same file as the host's --robot-key-file), or bind 127.0.0.1"
@@ -408,15 +410,6 @@ def read_key(path: str | None) -> bytes | None:
     if len(key) < 16:
         raise ConfigError(f"--key-file {path}: the key has {len(key)} bytes; use at least 16")
     return key
-
-
-def _is_loopback(host: str) -> bool:
-    import ipaddress
-
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return host == "localhost"
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -359,15 +359,21 @@ class OrientationFilter(ABC):
                     f"{rec.name} is sampled at {rate:.4g} Hz; build the filter with "
                     f"rate_hz={rate:.6g}"
                 )
-        dt = None
-        if use_timestamps and rec.n_samples > 1:
-            dt = np.concatenate([[self.params.dt], np.diff(rec.time)])
+        dt = recording_steps(rec, self.params.dt) if use_timestamps else None
         mag = rec.mag if use_mag else None
         q = self.run(rec.gyr, rec.acc, mag, dt=dt)
         return OrientationSeries(rec.time, q, name=rec.name)
 
     def copy(self) -> OrientationFilter:
         return copy.deepcopy(self)
+
+
+def recording_steps(rec: ImuRecording, nominal_dt: float) -> FloatArray | None:
+    """Per-sample time steps of a recording from its time stamps (the first sample's is
+    the nominal step), or None for fewer than two samples."""
+    if rec.n_samples < 2:
+        return None
+    return np.concatenate([[nominal_dt], np.diff(rec.time)])
 
 
 FilterFactory = Callable[..., OrientationFilter]
