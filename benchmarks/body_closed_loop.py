@@ -28,15 +28,13 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks._docs import write_section
-from mocapkit.body.calibration import HeadingFixed, pose_coordinates, q_world_ground
-from mocapkit.body.joint_angles import compose_pose
+from mocapkit.body.calibration import HeadingFixed, pose_coordinates
 from mocapkit.body.pipeline import run_body
 from mocapkit.body.sensor_tree import SensorTree
-from mocapkit.geometry import quat_conj, quat_exp, quat_mul, quat_rotate
+from mocapkit.body.simulate import segment_poses, virtual_suit
+from mocapkit.geometry import quat_conj, quat_mul
 from mocapkit.imu.filters import make_filter
 from mocapkit.imu.metrics import total_error
-from mocapkit.imu.simulate import ImuErrorModel, simulate_imu
-from mocapkit.series import PoseSeries
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 TRIAL = SHARED / "opensim" / "gait2392" / "subject01_walk1.trc"
@@ -73,48 +71,11 @@ def truth_motion(tree: SensorTree) -> tuple[np.ndarray, dict[str, np.ndarray], f
     return np.arange(n) / RATE, coords, (n_still + n_blend) / RATE
 
 
-def segment_poses(tree: SensorTree, time: np.ndarray, coords: dict[str, np.ndarray],
-                  speed: float) -> dict[str, PoseSeries]:  # fmt: skip
-    """World poses of every segment (ENU): orientations from the coordinates, positions
-    down the tree from the offsets, the pelvis moving forward at ``speed`` while walking."""
-    q_ground = compose_pose(tree, coords)  # (N, S, 4)
-    q_wg = q_world_ground(HEADING)
-    n = time.size
-    p_ground = np.zeros((n, len(tree.segments), 3))
-    forward = np.clip(time - STILL_S, 0.0, None) * speed
-    for i, seg in enumerate(tree.segments):
-        offset = np.asarray(seg.offset, dtype=float)
-        j = tree.parent_index[i]
-        if j < 0:
-            p_ground[:, i] = offset + np.outer(forward, [1.0, 0.0, 0.0])
-        else:
-            p_ground[:, i] = p_ground[:, j] + quat_rotate(q_ground[:, j], offset)
-    out = {}
-    for i, seg in enumerate(tree.segments):
-        q = quat_mul(q_wg, q_ground[:, i])
-        p = quat_rotate(q_wg, p_ground[:, i])
-        out[seg.name] = PoseSeries(time, q, p, name=seg.name)
-    return out
-
-
 def run(seed: int, tree: SensorTree, time: np.ndarray, coords: dict[str, np.ndarray],
         t_walk: float) -> dict[str, dict[str, float]]:  # fmt: skip
     rng = np.random.default_rng(seed)
-    segs = segment_poses(tree, time, coords, speed=1.2)
-    recs, mounts = {}, {}
-    for seg in tree.segments:
-        axis = rng.normal(size=3)
-        axis /= np.linalg.norm(axis)
-        angle = math.radians(rng.uniform(0.0, MAX_MOUNT_DEG))
-        mount = quat_exp(0.5 * angle * axis)  # q_segment_sensor
-        pose = segs[seg.name]
-        middle = 0.5 * np.asarray(seg.end, dtype=float)
-        p = pose.pos + quat_rotate(pose.quat, np.tile(middle, (time.size, 1)))
-        sensor_pose = PoseSeries(time, quat_mul(pose.quat, mount), p, name=seg.sensor)
-        recs[seg.sensor] = simulate_imu(
-            sensor_pose, ImuErrorModel.consumer_grade(), rng=rng, name=seg.sensor
-        )
-        mounts[seg.name] = mount
+    segs = segment_poses(tree, time, coords, heading_rad=HEADING, speed=1.2, walk_start_s=STILL_S)
+    recs, mounts = virtual_suit(tree, segs, rng, max_mount_deg=MAX_MOUNT_DEG)
     figures: dict[str, dict[str, float]] = {}
     walk = time >= t_walk
     for mode in ("9d", "6d"):

@@ -2,6 +2,7 @@
 
 mocapkit body presets [--json]
 mocapkit body angles RECORDING --preset full_body_15 -o angles.mot [--bvh body.bvh] --json
+mocapkit body identify RECORDING --preset full_body_16 -o placement.json
 """
 
 from __future__ import annotations
@@ -114,6 +115,11 @@ def _cmd_angles(args: argparse.Namespace) -> int:
     from mocapkit.body.sensor_tree import SensorTree
 
     tree = SensorTree.from_yaml(args.tree) if args.tree else SensorTree.preset(args.preset)
+    if args.map_file:
+        mapping = json.loads(Path(args.map_file).read_text())
+        if not isinstance(mapping, dict):
+            raise ConfigError(f"{args.map_file}: expected a JSON object {{segment: sensor}}")
+        tree = tree.with_sensor_names({str(k): str(v) for k, v in mapping.items()})
     if args.map:
         tree = tree.with_sensor_names(_parse_map(args.map))
     orientations = _load_orientations(Path(args.recording), args.format, args.filter, args.mode)
@@ -298,4 +304,9 @@ def register(subparsers: Any) -> None:
     a.add_argument("--calibration-out", help="write the calibration (JSON)")
     a.add_argument("--calibration-in", help="use a saved calibration (JSON)")
     a.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    a.add_argument("--map-file", help="JSON {segment: sensor}, as written by 'body identify -o'")
     a.set_defaults(func=_cmd_angles)
+
+    from mocapkit.cli.body_identify_cmd import register as register_identify
+
+    register_identify(sub)
