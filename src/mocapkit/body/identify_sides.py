@@ -43,7 +43,7 @@ from mocapkit.series import OrientationSeries
 MIN_COUPLING = 0.25
 # Joint-centre side: the share of the two joints' separation along the body's right.
 MIN_SIDE_SHARE = 0.3
-SURE_SIDE_SHARE = 0.6  # a joint-centre side this clear outweighs the gait
+SURE_SIDE_SHARE = 0.9  # a joint-centre side this clear outweighs the gait
 MAX_CENTRE_ERROR = 0.25  # standard error of a joint centre, share of the separation
 
 
