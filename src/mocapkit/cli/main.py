@@ -47,6 +47,11 @@ _COMMANDS: dict[str, tuple[str, str]] = {
         "mocapkit.cli.markers_cmd",
         "optical markers: reconstruct joint angles, report, inspect",
     ),
+    "retarget": (
+        "mocapkit.cli.retarget_cmd",
+        "a recording (markers, joint angles, IMUs) onto a humanoid robot",
+    ),
+    "robot": ("mocapkit.cli.robot_cmd", "humanoid robots for retargeting: list them"),
     "suit": (
         "mocapkit.cli.suit_cmd",
         "the motion suit: simulate, receive, record, replay, benchmark",

@@ -1,0 +1,143 @@
+"""Retarget a recording onto a humanoid, end to end, and write the robot trajectory.
+
+Inputs: a marker trial (C3D/TRC: reconstructed on the way), joint angles on OpenSim's
+coordinate names (.mot/.sto), or an inertial recording (through the body model, automatic
+calibration). Outputs by extension: ``.csv`` (time, base position and quaternion
+[w, x, y, z], joints [rad]), ``.npz`` (the same arrays with names).
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mocapkit.errors import ConfigError
+from mocapkit.retarget.human import HumanMotion, from_coordinates, from_reconstruction
+from mocapkit.retarget.robot_model import Humanoid, build_humanoid
+from mocapkit.retarget.robot_spec import load_robot_spec
+from mocapkit.retarget.solver import Solution, solve
+from mocapkit.retarget.targets import RetargetWarning, Targets, make_targets
+
+MARKER_SUFFIXES = (".c3d", ".trc")
+ANGLE_SUFFIXES = (".mot", ".sto")
+OUTPUT_SUFFIXES = (".csv", ".npz")
+
+
+@dataclass
+class Retargeted:
+    robot: Humanoid
+    motion: HumanMotion
+    targets: Targets
+    solution: Solution
+    figures: dict[str, Any]
+    notes: list[str]
+
+
+def load_human(
+    path: Path, segments: tuple[str, ...], *, height_m: float | None = None,
+    preset: str = "full_body_15",
+) -> tuple[HumanMotion, list[str]]:  # fmt: skip
+    """The human motion of ``path`` (module docstring) and the doubts raised on the way."""
+    suffix = path.suffix.lower()
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such file or directory")
+    if suffix in MARKER_SUFFIXES:
+        import mocapkit
+
+        rec = mocapkit.reconstruct(path, height_m=height_m)
+        return from_reconstruction(rec, segments), list(rec.warnings)
+    if suffix in ANGLE_SUFFIXES:
+        from mocapkit.io.joint_angles_mot import read_joint_angles_mot
+
+        a = read_joint_angles_mot(path)
+        coords = {n: a.column(n) for n in a.names}
+        notes = []
+        if not all(c in coords for c in ("pelvis_tx", "pelvis_ty", "pelvis_tz")):
+            notes.append(
+                f"{path.name} has no pelvis translation (pelvis_tx/ty/tz): the robot's "
+                "pelvis stays where it starts and the feet glide"
+            )
+        return from_coordinates(a.time, coords, segments), notes
+    from mocapkit.body.pipeline import run_body
+    from mocapkit.body.sensor_tree import SensorTree
+    from mocapkit.cli.body_cmd import _load_orientations
+
+    oris = _load_orientations(path, "auto")
+    res = run_body(SensorTree.preset(preset), oris, calibration="auto")
+    a = res.body.angles
+    coords = {n: a.column(n) for n in a.names}
+    note = (
+        "an inertial recording has no positions: the robot's pelvis stays where it starts "
+        "(walking becomes walking on the spot) and only the joint angles are retargeted"
+    )
+    return from_coordinates(a.time, coords, segments), [note]
+
+
+def retarget(
+    input_path: str | Path,
+    robot: str | Path,
+    *,
+    height_m: float | None = None,
+    preset: str = "full_body_15",
+    check_collisions: bool = True,
+) -> Retargeted:
+    """``input_path`` onto ``robot`` (a packaged name or a YAML): targets, one QP per
+    frame, and the figures of :mod:`mocapkit.retarget.metrics`."""
+    from mocapkit.retarget.collisions import SelfCollision
+    from mocapkit.retarget.metrics import evaluate
+
+    spec = load_robot_spec(robot)
+    humanoid = build_humanoid(spec)
+    segments = tuple(sorted({k.segment for k in spec.keypoints} | {f.segment for f in spec.feet}
+                            | {"pelvis"}))  # fmt: skip
+    motion, notes = load_human(Path(input_path), segments, height_m=height_m, preset=preset)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RetargetWarning)
+        targets = make_targets(motion, humanoid)
+    notes += [str(w.message) for w in caught]
+    sol = solve(humanoid, targets)
+    notes += sol.warnings
+    coll = SelfCollision(humanoid) if check_collisions else None
+    if coll is not None and not coll.available:
+        notes.append(f"self-collisions not checked: {coll.reason}")
+    figures = evaluate(humanoid, targets, sol, coll)
+    return Retargeted(humanoid, motion, targets, sol, figures, notes)
+
+
+def write_trajectory(path: str | Path, result: Retargeted) -> Path:
+    """``.csv`` or ``.npz`` (module docstring)."""
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in OUTPUT_SUFFIXES:
+        raise ConfigError(
+            f"output {p}: expected one of {', '.join(OUTPUT_SUFFIXES)} (the extension picks "
+            "the format)"
+        )
+    robot = result.robot
+    sol = result.solution
+    nb = robot.n_base_q
+    joints = list(robot.joint_names)
+    base = sol.q[:, :nb]
+    q = sol.q[:, nb:]
+    if nb:  # pinocchio's free flyer: xyz + quaternion [x, y, z, w] -> [w, x, y, z]
+        base = np.column_stack([base[:, :3], base[:, 6], base[:, 3:6]])
+    base_names = ["base_x", "base_y", "base_z", "base_qw", "base_qx", "base_qy", "base_qz"][:nb]
+    if suffix == ".npz":
+        np.savez(p, time=sol.time, base=base, q=q, joint_names=np.array(joints),
+                 base_names=np.array(base_names), robot=robot.spec.name)  # fmt: skip
+        return p
+    header = ",".join(["time", *base_names, *joints])
+    table = np.column_stack([sol.time, base, q])
+    np.savetxt(p, table, delimiter=",", header=header, comments="", fmt="%.9g")
+    return p
+
+
+def timed_retarget(*args: Any, **kwargs: Any) -> tuple[Retargeted, float]:
+    t0 = time.perf_counter()
+    out = retarget(*args, **kwargs)
+    return out, time.perf_counter() - t0
