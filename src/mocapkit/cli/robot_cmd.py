@@ -47,6 +47,10 @@ def register(sub: Any) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     cmds = p.add_subparsers(dest="robot_command", metavar="SUBCOMMAND")
-    ls = cmds.add_parser("list", help="the packaged robots (any --robot also takes a YAML path)")
+    ls = cmds.add_parser(
+        "list",
+        help="the packaged robots (any --robot also takes a YAML path)",
+        epilog="example: mocapkit robot list --json",
+    )
     ls.add_argument("--json", action="store_true", help="one JSON object on stdout")
     ls.set_defaults(func=_list)

@@ -1,0 +1,216 @@
+"""Whole-body retargeting (``mocapkit.retarget``) on short synthetic motions with exact
+answers: the robot YAML checks, standing still, limits, contacts, heading, collisions."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("proxsuite", reason="the robots extra (pip install 'mocapkit[robots]')")
+pytest.importorskip("pinocchio", reason="the robots extra")
+
+from mocapkit.body.sensor_tree import SensorTree
+from mocapkit.body.simulate import gait_coordinates
+from mocapkit.errors import ConfigError
+from mocapkit.retarget.human import from_coordinates
+from mocapkit.retarget.metrics import evaluate
+from mocapkit.retarget.robot_model import build_humanoid
+from mocapkit.retarget.robot_spec import load_robot_spec, packaged_robots
+from mocapkit.retarget.solver import solve
+from mocapkit.retarget.targets import RetargetWarning, make_targets
+
+SEGMENTS = ("pelvis", "thorax", "head", "upper_arm_r", "forearm_r", "hand_r", "upper_arm_l",
+            "forearm_l", "hand_l", "thigh_r", "shank_r", "foot_r", "thigh_l", "shank_l",
+            "foot_l")  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def g1():
+    return build_humanoid(load_robot_spec("g1"))
+
+
+def _walk(duration_s=6.0, speed=1.2, heading_deg=0.0, start=(0.0, 0.0)):
+    tree = SensorTree.preset("full_body_15")
+    t, coords, walk = gait_coordinates(tree, duration_s=duration_s, still_s=1.0)
+    moving = np.clip(t - walk, 0.0, None)
+    h = np.radians(heading_deg)
+    # OpenSim ground: x forward, y up, z right; walking along the heading
+    coords = dict(coords)
+    coords["pelvis_tx"] = start[0] + speed * moving * np.cos(h)
+    coords["pelvis_tz"] = -(start[1] + speed * moving * np.sin(h))
+    coords["pelvis_ty"] = np.zeros_like(t)
+    coords["pelvis_rotation"] = coords["pelvis_rotation"] + h
+    return from_coordinates(t, coords, SEGMENTS)
+
+
+def _standing(n=50):
+    tree = SensorTree.preset("full_body_15")
+    t = np.arange(n) / 100.0
+    coords = {c: np.zeros(n) for c in tree.coordinate_names}
+    return from_coordinates(t, coords, SEGMENTS)
+
+
+def test_packaged_robots_load():
+    assert {"g1", "talos", "romeo", "icub"} <= set(packaged_robots())
+    for name in ("g1", "talos", "romeo", "icub"):
+        robot = build_humanoid(load_robot_spec(name))
+        assert robot.model.nq > 7
+        assert np.all(robot.q_ref[robot.iq] >= robot.q_min[robot.iq])
+        assert np.all(robot.q_ref[robot.iq] <= robot.q_max[robot.iq])
+
+
+def _yaml(tmp_path: Path, edit) -> Path:
+    src = packaged_robots()["g1"].read_text()
+    p = tmp_path / "robot.yaml"
+    p.write_text(edit(src))
+    return p
+
+
+def test_wrong_frame_is_named(tmp_path):
+    p = _yaml(tmp_path, lambda s: s.replace("frame: right_wrist_yaw_link", "frame: right_palm"))
+    with pytest.raises(ConfigError, match="no frame 'right_palm'.*right_wrist_yaw_link"):
+        build_humanoid(load_robot_spec(p))
+
+
+def test_undriven_limb_end_is_refused(tmp_path):
+    def drop_hand(s):
+        return "\n".join(line for line in s.splitlines() if not line.strip().startswith("hand_r:"))
+
+    with pytest.raises(ConfigError, match="right arm.*hand_r"):
+        load_robot_spec(_yaml(tmp_path, drop_hand))
+
+
+def test_unknown_human_segment_is_refused(tmp_path):
+    p = _yaml(tmp_path, lambda s: s.replace("  thorax: {", "  chest: {"))
+    with pytest.raises(ConfigError, match="keypoints.chest: not a human segment"):
+        load_robot_spec(p)
+
+
+def test_standing_human_gives_the_reference_posture(g1):
+    targets = make_targets(_standing(), g1)
+    sol = solve(g1, targets)
+    figures = evaluate(g1, targets, sol)
+    assert figures["keypoint_rmse_mm"]["mean"] < 2.0
+    assert figures["limit_violations"] == {"position": 0, "velocity": 0}
+    np.testing.assert_allclose(sol.q[-1][g1.iq], g1.q_ref[g1.iq], atol=0.02)
+
+
+def test_walk_respects_limits_keeps_feet_still_and_above_ground(g1):
+    motion = _walk()
+    targets = make_targets(motion, g1)
+    assert not targets.belt.any()  # overground: no treadmill
+    assert all(c.sum() > 50 for c in targets.contact.values())
+    sol = solve(g1, targets)
+    f = evaluate(g1, targets, sol)
+    assert f["limit_violations"] == {"position": 0, "velocity": 0}
+    assert f["ground_penetration"]["frames"] == 0
+    assert f["foot_skate_mm"] < 2.0
+    assert f["held_frames"] == 0
+    assert np.isfinite(sol.q).all()
+    # the robot walked forward too (pelvis), at the leg-length ratio of the human's speed
+    travel = sol.q[-1, 0] - sol.q[0, 0]
+    assert 0.5 * 1.2 * 5.0 * targets.scale["pelvis"] < travel
+
+
+def test_any_starting_heading_and_position_gives_the_same_robot_motion(g1):
+    a = solve(g1, make_targets(_walk(heading_deg=0.0), g1))
+    b = solve(g1, make_targets(_walk(heading_deg=135.0, start=(3.0, -2.0)), g1))
+    diff = np.abs(a.q[:, g1.iq] - b.q[:, g1.iq])
+    assert diff.mean() < 5e-3  # the QP's tolerance moves a few joints by up to ~2 deg
+    assert diff.max() < 0.05
+
+
+def test_treadmill_is_detected_and_warned(g1):
+    """Feet that glide back at 1 m/s on the ground and swing forward in the air while the
+    body stays: a treadmill."""
+    from mocapkit.retarget.human import HumanMotion
+
+    still = _standing(n=400)
+    t = still.time
+    pos = dict(still.pos)
+    for foot, phase in (("foot_r", 0.0), ("foot_l", 0.5)):
+        cyc = ((t / 1.0) + phase) % 1.0  # 1 s stride: 0.6 s stance, 0.4 s swing
+        x = np.where(cyc < 0.6, 0.3 - 1.0 * cyc, -0.3 + 1.5 * (cyc - 0.6))
+        z = np.where(cyc < 0.6, 0.0, 0.1 * np.sin(np.pi * (cyc - 0.6) / 0.4))
+        pos[foot] = still.pos[foot] + np.column_stack([x, np.zeros_like(t), z])
+    tread = HumanMotion(t, pos, still.quat, still.neutral_pos, still.neutral_quat, "test")
+    with pytest.warns(RetargetWarning, match="treadmill"):
+        targets = make_targets(tread, g1)
+    assert targets.belt[0] == pytest.approx(-1.0, abs=0.05)
+    assert targets.belt[1] == pytest.approx(0.0, abs=0.05)
+
+
+def test_self_collision_is_counted(g1):
+    from mocapkit.retarget.collisions import SelfCollision
+
+    sc = SelfCollision(g1)
+    assert sc.available
+    assert sc.colliding(g1.q_ref) == []
+    q = g1.q_ref.copy()
+    jid = g1.model.getJointId("left_shoulder_roll_joint")
+    q[g1.model.joints[jid].idx_q] = g1.q_min[g1.model.joints[jid].idx_q]  # arm into the body
+    jid = g1.model.getJointId("left_elbow_joint")
+    q[g1.model.joints[jid].idx_q] = 0.0
+    hits = sc.colliding(q)
+    assert hits, "the left arm pressed into the torso must collide"
+    assert any("left" in a or "left" in b for a, b in hits)
+
+
+def test_cli_retarget_writes_a_trajectory_and_reports(tmp_path):
+    from mocapkit.io.joint_angles_mot import write_joint_angles_mot
+    from mocapkit.series import JointAngleSeries
+
+    tree = SensorTree.preset("full_body_15")
+    t, coords, _ = gait_coordinates(tree, duration_s=3.0, still_s=1.0)
+    coords = dict(coords)
+    coords["pelvis_tx"] = 1.2 * np.clip(t - 1.0, 0, None)
+    coords["pelvis_ty"] = np.full_like(t, 0.93)
+    coords["pelvis_tz"] = np.zeros_like(t)
+    names = tuple(coords)
+    mot = write_joint_angles_mot(
+        tmp_path / "walk.mot",
+        JointAngleSeries(t, names, np.column_stack([coords[n] for n in names])),
+    )
+    out = tmp_path / "g1.csv"
+    p = subprocess.run(
+        [sys.executable, "-m", "mocapkit", "retarget", str(mot), "--robot", "g1", "-o", str(out),
+         "--json"],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    report = json.loads(p.stdout)
+    for key in ("robot", "frames", "fps", "keypoint_rmse_mm", "foot_skate_mm",
+                "limit_violations", "collisions"):  # fmt: skip
+        assert key in report
+    assert report["frames"] == t.size
+    header = out.read_text().splitlines()[0].split(",")
+    assert header[:8] == ["time", "base_x", "base_y", "base_z", "base_qw", "base_qx", "base_qy",
+                          "base_qz"]  # fmt: skip
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert data.shape == (t.size, 1 + 7 + 29)
+    assert np.isfinite(data).all()
+    p = subprocess.run([sys.executable, "-m", "mocapkit", "robot", "list", "--json"],
+                       capture_output=True, text=True, check=True)  # fmt: skip
+    assert json.loads(p.stdout)["g1"]["available"]
+
+
+def test_cli_refuses_an_unknown_output_format(tmp_path):
+    p = subprocess.run(
+        [sys.executable, "-m", "mocapkit", "retarget", "x.mot", "--robot", "g1", "-o",
+         str(tmp_path / "x.bvh")],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    assert p.returncode == 1
+    assert ".csv" in p.stderr
+
+
+def test_warnings_as_errors_do_not_leak():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_robot_spec("talos")
