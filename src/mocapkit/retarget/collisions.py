@@ -2,8 +2,9 @@
 counted on the retargeted motion.
 
 Pairs checked: every pair of collision bodies, less those on the same or neighbouring
-links (a joint between them) and those already touching in the reference posture (the
-meshes of many URDFs overlap at rest). A bounding-sphere test first, then coal on the
+links (a joint between them), those already touching in the reference posture (the
+meshes of many URDFs overlap at rest) and those touching in 90 % of 30 random postures
+within the limits (meshes that overlap whatever the joints do). A bounding-sphere test first, then coal on the
 pairs whose spheres overlap (0.3 ms a frame for G1's 571 pairs).
 
 Not done: avoidance in the QP. Distance rows on the meshes cost ~2 ms per pair with coal
@@ -17,6 +18,9 @@ import numpy as np
 
 from mocapkit._validate import FloatArray
 from mocapkit.retarget.robot_model import Humanoid
+
+ALWAYS_SAMPLES = 30
+ALWAYS_SHARE = 0.9
 
 
 class SelfCollision:
@@ -62,6 +66,31 @@ class SelfCollision:
         self.pairs = np.array(keep, dtype=np.int64).reshape(-1, 2)
         self.gd = gm.createData()
         self.data = model.createData()
+        self._drop_always_colliding()
+
+    def _drop_always_colliding(self) -> None:
+        """Pairs that intersect in nearly every posture (meshes that overlap whatever the
+        joints do, as MoveIt's setup assistant finds them) are not self-collisions."""
+        import pinocchio as pin
+
+        r = self.robot
+        rng = np.random.default_rng(0)
+        hits = np.zeros(len(self.pairs), dtype=int)
+        lo, hi = r.q_min[r.iq], r.q_max[r.iq]
+        for _ in range(ALWAYS_SAMPLES):
+            q = r.q_ref.copy()
+            q[r.iq] = rng.uniform(lo, hi)
+            pin.forwardKinematics(r.model, self.data, q)
+            for k in self._candidates(0.0):
+                hits[k] += bool(pin.computeCollision(self.gm, self.gd, int(k)))
+        keep = hits < ALWAYS_SHARE * ALWAYS_SAMPLES
+        self.always = [(self.gm.geometryObjects[int(a)].name, self.gm.geometryObjects[int(b)].name)
+                       for a, b in self.pairs[~keep]]  # fmt: skip
+        self.gm.removeAllCollisionPairs()
+        for a, b in self.pairs[keep]:
+            self.gm.addCollisionPair(pin.CollisionPair(int(a), int(b)))
+        self.pairs = self.pairs[keep]
+        self.gd = self.gm.createData()
 
     def _candidates(self, margin: float) -> np.ndarray:
         import pinocchio as pin
