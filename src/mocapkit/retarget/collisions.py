@@ -4,8 +4,8 @@ counted on the retargeted motion.
 Pairs checked: every pair of collision bodies, less those on the same or neighbouring
 links (a joint between them), those already touching in the reference posture (the
 meshes of many URDFs overlap at rest) and those touching in 90 % of 30 random postures
-within the limits (meshes that overlap whatever the joints do). A bounding-sphere test first, then coal on the
-pairs whose spheres overlap (0.3 ms a frame for G1's 571 pairs).
+within the limits (meshes that overlap whatever the joints do). A bounding-sphere test
+first, then coal on the pairs whose spheres overlap (0.3 ms a frame for G1's 571 pairs).
 
 Not done: avoidance in the QP. Distance rows on the meshes cost ~2 ms per pair with coal
 (20 frames/s); on convex hulls the distances disagreed with the meshes' (a hull came out
