@@ -221,8 +221,13 @@ def test_cli_identify_then_angles_with_the_map(shared_data, tmp_path):
     mot = tmp_path / "angles.mot"
     p = subprocess.run(
         [*run, "angles", str(rec), "--format", "device", "--preset", "lower_body",
-         "--map-file", str(out), "-o", str(mot)],
+         "--map-file", str(out), "-o", str(mot), "--json"],
         capture_output=True, text=True, check=False,
     )  # fmt: skip
     assert p.returncode == 0, p.stderr
     assert mot.exists()
+    residuals = json.loads(p.stdout)["calibration"]["segments"]
+    assert set(residuals) == {"pelvis", "femur_r", "tibia_r", "calcn_r", "femur_l", "tibia_l",
+                              "calcn_l"}  # fmt: skip
+    assert all("still_deviation_deg" in r for r in residuals.values())
+    assert residuals["tibia_r"]["functional_share"] > 0.6

@@ -160,6 +160,12 @@ def summary(result: BodyResult) -> dict[str, Any]:
             "heading_deg": float(np.rad2deg(cal.heading_rad)),
             "window_s": list(cal.window),
             **{k: v for k, v in cal.diagnostics.items() if not isinstance(v, dict)},
+            # per segment: how still its sensor was in the window, how clearly it showed its
+            # joint's axis, how far its heading sits from the body's (the residuals)
+            "segments": {
+                name: {k: round(float(v), 3) for k, v in seg.diagnostics.items()}
+                for name, seg in cal.segments.items()
+            },
         },
         "gimbal_lock": {k: int(v.size) for k, v in result.body.gimbal.items()},
         "near_gimbal": dict(result.body.near_gimbal),
