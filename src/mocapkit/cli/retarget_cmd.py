@@ -39,7 +39,7 @@ def _cmd(args: argparse.Namespace) -> int:
         )
     res = retarget(
         args.input, args.robot, height_m=args.height, preset=args.preset,
-        check_collisions=not args.no_collision_check,
+        check_collisions=not args.no_collision_check, avoid_collisions=args.avoid_collisions,
     )  # fmt: skip
     if args.output:
         write_trajectory(args.output, res)
@@ -100,6 +100,12 @@ def register(sub: Any) -> None:
     )
     p.add_argument(
         "--no-collision-check", action="store_true", help="skip counting self-collisions"
+    )
+    p.add_argument(
+        "--avoid-collisions",
+        action="store_true",
+        help="keep the robot's bodies apart in the QP (experimental: spheres around the "
+        "meshes; ~3x slower; frames where it cannot hold are solved without it, warned)",
     )
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.set_defaults(func=_cmd)

@@ -85,9 +85,12 @@ def retarget(
     height_m: float | None = None,
     preset: str = "full_body_15",
     check_collisions: bool = True,
+    avoid_collisions: bool = False,
 ) -> Retargeted:
     """``input_path`` onto ``robot`` (a packaged name or a YAML): targets, one QP per
-    frame, and the figures of :mod:`mocapkit.retarget.metrics`."""
+    frame, and the figures of :mod:`mocapkit.retarget.metrics`. ``avoid_collisions``:
+    keep the bodies apart in the QP (experimental: spheres around the meshes; slower, and
+    frames where it cannot be met with the limits are solved without it, warned)."""
     from mocapkit.retarget.collisions import SelfCollision
     from mocapkit.retarget.metrics import evaluate
 
@@ -100,9 +103,14 @@ def retarget(
         warnings.simplefilter("always", RetargetWarning)
         targets = make_targets(motion, humanoid)
     notes += [str(w.message) for w in caught]
-    sol = solve(humanoid, targets)
+    coll = SelfCollision(humanoid) if (check_collisions or avoid_collisions) else None
+    avoid = None
+    if avoid_collisions and coll is not None:
+        from mocapkit.retarget.collisions import SphereAvoidance
+
+        avoid = SphereAvoidance(coll)
+    sol = solve(humanoid, targets, avoid)
     notes += sol.warnings
-    coll = SelfCollision(humanoid) if check_collisions else None
     if coll is not None and not coll.available:
         notes.append(f"self-collisions not checked: {coll.reason}")
     figures = evaluate(humanoid, targets, sol, coll)

@@ -7,7 +7,8 @@ pulls towards the constant-velocity prediction of the frame (the last frame plus
 frame's step), instead of a post-filter; a small pull to the reference posture.
 Constraints: joint position limits and velocity limits as box bounds on ``dq``
 (``v_max * dt``), and every sole point at or above the ground (``z + J_z dq >= 0``).
-Self-collisions are counted afterwards (``collisions.py``), not yet avoided. Two
+With ``avoid`` (``collisions.SphereAvoidance``), soft rows keep the bodies' spheres apart
+(one slack per row, cost ``AVOID_WEIGHT``). Self-collisions are counted afterwards. Two
 iterations per frame from the previous frame's solution; the first frame is solved from
 the reference posture without the velocity limits (30 iterations, 0.1 rad trust region).
 A frame whose QP has no solution is held, and reported.
@@ -20,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mocapkit._validate import FloatArray
+from mocapkit.retarget.collisions import SphereAvoidance
 from mocapkit.retarget.robot_model import Humanoid
 from mocapkit.retarget.targets import Targets
 
@@ -30,7 +32,11 @@ DAMPING = 1e-6
 ITERATIONS = 2
 FIRST_ITERATIONS = 30  # the first frame starts from the reference posture
 FIRST_STEP_RAD = 0.1  # per iteration on the first frame
-VELOCITY_SHARE = 0.99  # of the velocity limit the steps may use
+VELOCITY_SHARE = 0.99
+AVOID_WEIGHT = 1e4  # cost of a metre of slack on an avoidance row, squared
+GIVE_WAY_M = (
+    0.005  # slack beyond this on a row is reported  # of the velocity limit the steps may use
+)
 
 
 @dataclass
@@ -53,13 +59,17 @@ def _log3(r: FloatArray) -> FloatArray:
 class FrameSolver:
     """The per-frame QP (module docstring); ``step(k, targets)`` solves frame k."""
 
-    def __init__(self, robot: Humanoid, targets: Targets) -> None:
+    def __init__(
+        self, robot: Humanoid, targets: Targets, avoid: SphereAvoidance | None = None
+    ) -> None:
         self.robot = robot
         self.targets = targets
         m = robot.model
         self.nv = int(m.nv)
         self.n_feet = len(robot.spec.feet)
         self.held: list[int] = []  # frames whose QP had no solution (held)
+        self.avoid = avoid if avoid is not None and avoid.available else None
+        self.relaxed: list[int] = []  # frames where an avoidance row gave way (slack)
         self.q = robot.q_ref.copy()
         self.q_last: FloatArray | None = None
         self.anchors: dict[str, tuple[FloatArray, FloatArray]] = {}
@@ -114,6 +124,7 @@ class FrameSolver:
         m, d = self.robot.model, self.robot.data
         nb = self.robot.n_base_v
         first = self.q_last is None  # the start pose: no velocity limit, solved to rest
+        self.k_now = k
         q_start = self.q.copy()
         for _ in range(FIRST_ITERATIONS if first else ITERATIONS):
             pin.computeJointJacobians(m, d, self.q)
@@ -133,7 +144,11 @@ class FrameSolver:
                 lo[iv] = np.maximum(lo[iv], -FIRST_STEP_RAD)
                 hi[iv] = np.minimum(hi[iv], FIRST_STEP_RAD)
             c, u = self._ground()
-            dq = self._solve_qp(h, g, c, u, lo, hi)
+            if self.avoid is not None:
+                ca, ua = self.avoid.rows(self.q)
+                dq = self._solve_with_slack(h, g, c, u, ca, ua, lo, hi)
+            else:
+                dq = self._solve_qp(h, g, c, u, lo, hi)
             if dq is None:  # not even the joints' bounds and the ground together: hold
                 self.held.append(k)
                 break
@@ -149,6 +164,32 @@ class FrameSolver:
         self.q_pred = np.asarray(pin.integrate(m, self.q, step))
         return self.q
 
+    def _solve_with_slack(
+        self, h: FloatArray, g: FloatArray, c: FloatArray, u: FloatArray, ca: FloatArray,
+        ua: FloatArray, lo: FloatArray, hi: FloatArray,
+    ) -> FloatArray | None:  # fmt: skip
+        """The step with the avoidance rows ``ca dq <= ua`` made soft: one slack per row,
+        ``ca dq - s <= ua``, ``s >= 0`` at cost ``AVOID_WEIGHT * s^2`` (always feasible;
+        a row that cannot hold with the limits gives way as little as it must)."""
+        n, m = self.nv, len(ua)
+        h2 = np.zeros((n + m, n + m))
+        h2[:n, :n] = h
+        h2[n:, n:] = AVOID_WEIGHT * np.eye(m)
+        g2 = np.concatenate([g, np.zeros(m)])
+        c2 = np.zeros((len(u) + m, n + m))
+        c2[: len(u), :n] = c
+        c2[len(u) :, :n] = ca
+        c2[len(u) :, n:] = -np.eye(m)
+        u2 = np.concatenate([u, ua])
+        lo2 = np.concatenate([lo, np.zeros(m)])
+        hi2 = np.concatenate([hi, np.full(m, 1e20)])
+        x = self._solve_qp(h2, g2, c2, u2, lo2, hi2)
+        if x is None:
+            return None
+        if float(np.max(x[n:], initial=0.0)) > GIVE_WAY_M:
+            self.relaxed.append(self.k_now)
+        return x[:n]
+
     def _solve_qp(
         self, h: FloatArray, g: FloatArray, c: FloatArray, u: FloatArray, lo: FloatArray,
         hi: FloatArray,
@@ -156,7 +197,7 @@ class FrameSolver:
         """The step, or None when the QP has no solution (the frame is then held)."""
         import proxsuite
 
-        qp = proxsuite.proxqp.dense.QP(self.nv, 0, len(u), True)
+        qp = proxsuite.proxqp.dense.QP(len(g), 0, len(u), True)
         qp.settings.eps_abs = 1e-6
         qp.settings.verbose = False
         qp.init(h, g, None, None, c, np.full(len(u), -1e20), u, lo, hi)
@@ -215,13 +256,13 @@ class FrameSolver:
         return c, u
 
 
-def solve(robot: Humanoid, targets: Targets) -> Solution:
-    """Every frame in order (module docstring)."""
+def solve(robot: Humanoid, targets: Targets, avoid: SphereAvoidance | None = None) -> Solution:
+    """Every frame in order (module docstring); with ``avoid``, bodies are kept apart."""
     import time
 
     import pinocchio as pin
 
-    solver = FrameSolver(robot, targets)
+    solver = FrameSolver(robot, targets, avoid)
     n = targets.time.size
     q_out = np.empty((n, robot.model.nq))
     kp_pos = {k.segment: np.empty((n, 3)) for k in robot.spec.keypoints}
@@ -238,6 +279,11 @@ def solve(robot: Humanoid, targets: Targets) -> Solution:
             sole_pos[f.segment][k] = m.translation + m.rotation @ f.sole
     sol = Solution(targets.time, q_out, kp_pos, sole_pos, time.perf_counter() - t0)
     sol.held_frames = list(solver.held)
+    if solver.relaxed:
+        sol.warnings.append(
+            f"{len(set(solver.relaxed))} frame(s) where collision avoidance gave way (no step "
+            f"met it with the limits), first at frame {solver.relaxed[0]}"
+        )
     if solver.held:
         sol.warnings.append(
             f"{len(solver.held)} frame(s) held (no joint step met the limits and the ground), "
