@@ -233,3 +233,30 @@ def test_warnings_as_errors_do_not_leak():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         load_robot_spec("talos")
+
+
+def test_fixed_base_robonaut2_from_the_shared_urdf(shared_data, monkeypatch):
+    """Robonaut 2's upper body on its fixed waist (URDF from ../shared, not shipped): the
+    human is seen from its pelvis; standing gives the reference posture, a walk keeps the
+    limits."""
+    monkeypatch.setenv("MOCAPKIT_SHARED_DATA", str(shared_data))
+    r2 = build_humanoid(load_robot_spec("robonaut2"))
+    assert not r2.spec.floating_base
+    still = make_targets(_standing(), r2)
+    sol = solve(r2, still)
+    assert evaluate(r2, still, sol)["keypoint_rmse_mm"]["mean"] < 2.0
+    walk = make_targets(_walk(), r2)
+    f = evaluate(r2, walk, solve(r2, walk))
+    assert f["limit_violations"] == {"position": 0, "velocity": 0}
+    assert f["keypoint_rmse_mm"]["mean"] < 80.0
+
+
+def test_fixed_base_needs_its_root_frame(tmp_path):
+    p = tmp_path / "r.yaml"
+    p.write_text(
+        "name: x\nurdf: example-robot-data:robots/g1_description/urdf/g1_29dof_rev_1_0.urdf\n"
+        "floating_base: false\nkeypoints:\n  hand_r: {frame: right_wrist_yaw_link}\n"
+        "  forearm_r: {frame: right_elbow_link}\n"
+    )
+    with pytest.raises(ConfigError, match="root_frame"):
+        load_robot_spec(p)

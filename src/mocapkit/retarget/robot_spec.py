@@ -190,6 +190,11 @@ def spec_from_dict(data: Mapping[str, Any], path: Path) -> RobotSpec:
     floating = bool(data.get("floating_base", True))
     if floating and "pelvis" not in names:
         raise ConfigError(f"{path}: a floating-base robot needs keypoints.pelvis")
+    if not floating and (not data.get("root_frame") or "pelvis" in names):
+        raise ConfigError(
+            f"{path}: a fixed-base robot names its root frame (root_frame: LINK, which stands "
+            "for the human pelvis) and has no keypoints.pelvis"
+        )
     return RobotSpec(
         name=str(data["name"]),
         urdf=_resolve_urdf(str(data["urdf"]), path),

@@ -158,6 +158,8 @@ def make_targets(motion: HumanMotion, robot: Humanoid) -> Targets:
         )  # fmt: skip
     pin.framesForwardKinematics(robot.model, robot.data, robot.q_ref)
     frame_of = {k.segment: k.frame for k in spec.keypoints}  # (feet's sole frames apart)
+    if not spec.floating_base:  # the fixed root stands for the pelvis
+        frame_of["pelvis"] = str(spec.root_frame)
     ref_pos = {s: robot.frame_pose(f)[0] for s, f in frame_of.items()}
     ref_rot = {s: robot.frame_pose(f)[1] for s, f in frame_of.items()}
 
@@ -170,6 +172,14 @@ def make_targets(motion: HumanMotion, robot: Humanoid) -> Targets:
     rot_h = {s: align @ quat_to_matrix(motion.quat[s]) for s in need}
     n_pos = {s: motion.neutral_pos[s] for s in need}
     n_rot = {s: quat_to_matrix(motion.neutral_quat[s]) for s in need}
+    if not spec.floating_base:
+        # a fixed base cannot follow the pelvis: the human is seen from its own pelvis
+        # (its pelvis held in the neutral pose), as the paper's relative control does
+        to_pelvis = n_rot["pelvis"] @ np.swapaxes(rot_h["pelvis"], 1, 2)  # (N, 3, 3)
+        p0 = pos_h["pelvis"]
+        pos_h = {s: n_pos["pelvis"] + np.einsum("nij,nj->ni", to_pelvis, p - p0)
+                 for s, p in pos_h.items()}  # fmt: skip
+        rot_h = {s: to_pelvis @ r for s, r in rot_h.items()}
 
     s_root = float(ref_pos["pelvis"][2] / max(n_pos["pelvis"][2], 1e-6))
     scale = {"pelvis": s_root}
@@ -181,7 +191,7 @@ def make_targets(motion: HumanMotion, robot: Humanoid) -> Targets:
             ref_pos["pelvis"][2] + s_root * (pos_h["pelvis"][:, 2] - n_pos["pelvis"][2]),
         ]
     )
-    pos_t["pelvis"] = root
+    pos_t["pelvis"] = root if spec.floating_base else np.tile(ref_pos["pelvis"], (len(root), 1))
     for s in _order(kps - {"pelvis"}):
         a = _ancestor(s, kps | {"pelvis"}) or "pelvis"
         human_bone = float(np.linalg.norm(n_pos[s] - n_pos[a]))
