@@ -260,3 +260,50 @@ def test_fixed_base_needs_its_root_frame(tmp_path):
     )
     with pytest.raises(ConfigError, match="root_frame"):
         load_robot_spec(p)
+
+
+def test_mcap_output_reads_back_with_the_mcap_library(tmp_path):
+    """The .mcap output, read by the mcap package: joint positions equal the solution, and
+    the frame tree composed from world down to a link gives that link's pose."""
+    import pinocchio as pin
+
+    from mocapkit.geometry import quat_to_matrix
+    from mocapkit.io.foxglove_mcap import read_foxglove_mcap
+    from mocapkit.io.joint_angles_mot import write_joint_angles_mot
+    from mocapkit.retarget.run import retarget, write_trajectory
+    from mocapkit.series import JointAngleSeries
+
+    tree = SensorTree.preset("full_body_15")
+    t, coords, _ = gait_coordinates(tree, duration_s=2.0, still_s=0.5)
+    coords = dict(coords)
+    coords.update(pelvis_tx=np.clip(t - 0.5, 0, None), pelvis_ty=np.full_like(t, 0.93),
+                  pelvis_tz=np.zeros_like(t))  # fmt: skip
+    names = tuple(coords)
+    mot = write_joint_angles_mot(
+        tmp_path / "w.mot", JointAngleSeries(t, names, np.column_stack([coords[n] for n in names]))
+    )
+    res = retarget(mot, "g1", check_collisions=False)
+    out = write_trajectory(tmp_path / "g1.mcap", res)
+    msgs = read_foxglove_mcap(out)
+    joints = msgs["/robot/joints"]
+    assert len(joints) == t.size
+    k = 10
+    np.testing.assert_allclose(joints[k][2]["position"], res.solution.q[k, 7:], atol=1e-9)
+    tf = {m["child_frame_id"]: m for m in msgs["/robot/tf"][k][2]["transforms"]}
+    link = "right_elbow_joint"
+    chain = []
+    while link in tf:
+        chain.append(tf[link])
+        link = tf[link]["parent_frame_id"]
+    assert link == "world"
+    pose = pin.SE3.Identity()
+    for m in reversed(chain):
+        r, p = m["rotation"], m["translation"]
+        rot = quat_to_matrix(np.array([r["w"], r["x"], r["y"], r["z"]]))
+        pose = pose * pin.SE3(rot, np.array([p["x"], p["y"], p["z"]]))
+    model = res.robot.model
+    data = model.createData()
+    pin.forwardKinematics(model, data, res.solution.q[k])
+    expected = data.oMi[model.getJointId("right_elbow_joint")]
+    np.testing.assert_allclose(pose.translation, expected.translation, atol=1e-6)
+    assert joints[0][0] > 1_600_000_000 * 10**9  # wall-clock timestamps, not 1970

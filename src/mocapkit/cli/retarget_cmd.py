@@ -93,7 +93,11 @@ def register(sub: Any) -> None:
         "input", help="C3D/TRC marker trial, .mot/.sto joint angles, or an IMU recording"
     )
     p.add_argument("--robot", required=True, help="packaged robot name or a robot YAML file")
-    p.add_argument("-o", "--output", help="robot trajectory: .csv or .npz")
+    p.add_argument(
+        "-o",
+        "--output",
+        help="robot trajectory: .csv, .npz or .mcap (Foxglove: joints, frame tree)",
+    )
     p.add_argument("--height", type=float, help="subject height [m] (marker trials)")
     p.add_argument(
         "--preset", default="full_body_15", help="sensor tree for an IMU recording (body presets)"

@@ -60,6 +60,16 @@ SCHEMAS: dict[str, dict[str, Any]] = {
             },
         },
     },
+    # not a Foxglove schema: joint positions by name (a ROS JointState's name/position)
+    "mocapkit.JointPositions": {
+        "title": "mocapkit.JointPositions",
+        "type": "object",
+        "properties": {
+            "timestamp": _TIME,
+            "name": {"type": "array", "items": {"type": "string"}},
+            "position": {"type": "array", "items": {"type": "number"}},
+        },
+    },
 }
 
 
@@ -152,6 +162,15 @@ class FoxgloveMcapWriter:
             "pose": {"position": _vec(position), "orientation": _quat(q)},
         }
         self._write(topic, "foxglove.PoseInFrame", t_ns, msg)
+
+    def joint_positions(self, topic: str, t_ns: int, names: Sequence[str], positions: Any) -> None:
+        """Joint positions [rad, m] by name (``mocapkit.JointPositions``)."""
+        msg = {
+            "timestamp": _stamp(t_ns),
+            "name": list(names),
+            "position": [float(x) for x in positions],
+        }
+        self._write(topic, "mocapkit.JointPositions", t_ns, msg)
 
     def close(self) -> None:
         self._writer.finish()

@@ -3,7 +3,10 @@
 Inputs: a marker trial (C3D/TRC: reconstructed on the way), joint angles on OpenSim's
 coordinate names (.mot/.sto), or an inertial recording (through the body model, automatic
 calibration). Outputs by extension: ``.csv`` (time, base position and quaternion
-[w, x, y, z], joints [rad]), ``.npz`` (the same arrays with names).
+[w, x, y, z], joints [rad]), ``.npz`` (the same arrays with names), ``.mcap`` (Foxglove:
+``/robot/joints`` joint positions, ``/robot/tf`` the frame tree world -> base -> every
+link with real translations, ``/robot/targets`` the keypoint targets; wall-clock
+timestamps from when the file is written).
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from mocapkit.retarget.targets import RetargetWarning, Targets, make_targets
 
 MARKER_SUFFIXES = (".c3d", ".trc")
 ANGLE_SUFFIXES = (".mot", ".sto")
-OUTPUT_SUFFIXES = (".csv", ".npz")
+OUTPUT_SUFFIXES = (".csv", ".npz", ".mcap")
 
 
 @dataclass
@@ -135,6 +138,8 @@ def write_trajectory(path: str | Path, result: Retargeted) -> Path:
     if nb:  # pinocchio's free flyer: xyz + quaternion [x, y, z, w] -> [w, x, y, z]
         base = np.column_stack([base[:, :3], base[:, 6], base[:, 3:6]])
     base_names = ["base_x", "base_y", "base_z", "base_qw", "base_qx", "base_qy", "base_qz"][:nb]
+    if suffix == ".mcap":
+        return _write_mcap(p, result)
     if suffix == ".npz":
         np.savez(p, time=sol.time, base=base, q=q, joint_names=np.array(joints),
                  base_names=np.array(base_names), robot=robot.spec.name)  # fmt: skip
@@ -149,3 +154,37 @@ def timed_retarget(*args: Any, **kwargs: Any) -> tuple[Retargeted, float]:
     t0 = time.perf_counter()
     out = retarget(*args, **kwargs)
     return out, time.perf_counter() - t0
+
+
+def _write_mcap(path: Path, result: Retargeted) -> Path:
+    import time as _time
+
+    import pinocchio as pin
+
+    from mocapkit.geometry import quat_from_matrix
+    from mocapkit.io.foxglove_mcap import FoxgloveMcapWriter
+
+    robot = result.robot
+    model, data = robot.model, robot.model.createData()
+    sol = result.solution
+    t0 = _time.time_ns()
+    names = list(model.names)
+    with FoxgloveMcapWriter(path) as w:
+        for k, t in enumerate(sol.time):
+            t_ns = t0 + round((t - sol.time[0]) * 1e9)
+            q = sol.q[k]
+            pin.forwardKinematics(model, data, q)
+            w.joint_positions("/robot/joints", t_ns, robot.joint_names, q[robot.n_base_q :])
+            tfs = []
+            for j in range(1, model.njoints):
+                parent = int(model.parents[j])
+                m = data.oMi[j] if parent == 0 else data.oMi[parent].actInv(data.oMi[j])
+                frame = "world" if parent == 0 else names[parent]
+                rot = quat_from_matrix(np.array(m.rotation))
+                tfs.append((frame, names[j], np.array(m.translation), rot))
+            w.frame_transforms("/robot/tf", t_ns, tfs)
+            for seg, pos in result.targets.pos.items():
+                rot = result.targets.rot.get(seg)
+                qt = quat_from_matrix(rot[k]) if rot is not None else np.array([1.0, 0, 0, 0])
+                w.pose_in_frame(f"/robot/targets/{seg}", t_ns, "world", pos[k], qt)
+    return path
