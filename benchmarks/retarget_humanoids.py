@@ -27,7 +27,7 @@ INPUTS = [
     ("CMU 85_02 (C3D)", SHARED / "c3d/cmu_85_02.c3d", None),
     ("15-IMU full body", SHARED / "full-body-15-imu/full_body_example_data.mat", None),
 ]
-ROBOTS = ("g1", "talos", "romeo", "icub")
+ROBOTS = ("g1", "talos", "romeo", "icub", "robonaut2")
 
 
 def main() -> None:

@@ -184,7 +184,11 @@ def _write_mcap(path: Path, result: Retargeted) -> Path:
                 tfs.append((frame, names[j], np.array(m.translation), rot))
             w.frame_transforms("/robot/tf", t_ns, tfs)
             for seg, pos in result.targets.pos.items():
-                rot = result.targets.rot.get(seg)
-                qt = quat_from_matrix(rot[k]) if rot is not None else np.array([1.0, 0, 0, 0])
+                target_rot = result.targets.rot.get(seg)
+                qt = (
+                    quat_from_matrix(target_rot[k])
+                    if target_rot is not None
+                    else np.array([1.0, 0.0, 0.0, 0.0])
+                )
                 w.pose_in_frame(f"/robot/targets/{seg}", t_ns, "world", pos[k], qt)
     return path
