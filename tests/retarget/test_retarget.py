@@ -307,3 +307,39 @@ def test_mcap_output_reads_back_with_the_mcap_library(tmp_path):
     expected = data.oMi[model.getJointId("right_elbow_joint")]
     np.testing.assert_allclose(pose.translation, expected.translation, atol=1e-6)
     assert joints[0][0] > 1_600_000_000 * 10**9  # wall-clock timestamps, not 1970
+
+
+def test_bvh_input_gives_the_segments_it_was_written_from(tmp_path):
+    """A BVH written by mocapkit from known segment orientations reads back (through the
+    y-up -> z-up turn and the BVH's own rest pose) with the same relative rotations, and
+    retargets like the joint angles it came from."""
+    from mocapkit.body.calibration import q_world_ground
+    from mocapkit.body.simulate import segment_poses
+    from mocapkit.body.skeleton import bvh_from_segments
+    from mocapkit.geometry import quat_angle, quat_conj, quat_mul
+    from mocapkit.io.bvh import write_bvh
+    from mocapkit.retarget.human import TREE_TO_HUMAN, from_bvh
+    from mocapkit.series import OrientationSeries
+
+    tree = SensorTree.preset("full_body_15")
+    t, coords, _ = gait_coordinates(tree, duration_s=2.0, still_s=0.5)
+    poses = segment_poses(tree, t, coords, speed=0.0)
+    segs = {k: OrientationSeries(t, p.quat) for k, p in poses.items()}
+    bvh = write_bvh(tmp_path / "walk.bvh", bvh_from_segments(tree, segs, q_world_ground(0.0)))
+    motion, notes = from_bvh(bvh, SEGMENTS)
+    assert any("cm" in n for n in notes)
+    for tree_seg, human_seg in TREE_TO_HUMAN.items():
+        # the knee's rotation relative to the thigh is what the BVH must keep
+        if human_seg != "shank_r":
+            continue
+        parent = "femur_r"
+        rel_src = quat_mul(quat_conj(poses[parent].quat), poses[tree_seg].quat)
+        rel_bvh = quat_mul(quat_conj(motion.quat["thigh_r"]), motion.quat["shank_r"])
+        rel0_src = quat_mul(quat_conj(rel_src[0]), rel_src)
+        rel0_bvh = quat_mul(quat_conj(rel_bvh[0]), rel_bvh)
+        assert np.degrees(quat_angle(quat_mul(quat_conj(rel0_src), rel0_bvh))).max() < 0.01
+    g1 = build_humanoid(load_robot_spec("g1"))
+    sol = solve(g1, make_targets(motion, g1))
+    f = evaluate(g1, make_targets(motion, g1), sol)
+    assert f["limit_violations"] == {"position": 0, "velocity": 0}
+    assert f["keypoint_rmse_mm"]["mean"] < 40.0

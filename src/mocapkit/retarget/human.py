@@ -153,3 +153,122 @@ def from_coordinates(
         neutral_quat=n_quat,
         source="joint angles",
     )
+
+
+# BVH joint names (lower case, any "prefix:" dropped) -> human segments
+BVH_NAMES = {
+    "pelvis": ("hips", "hip", "pelvis", "root"),
+    "thorax": ("spine2", "chest", "spine1", "torso", "thorax", "upperchest"),
+    "head": ("head",),
+    "upper_arm_r": ("rightarm", "rightupperarm", "r_upperarm", "humerus_r", "rshldr"),
+    "forearm_r": ("rightforearm", "rightlowerarm", "r_forearm", "radius_r", "rforearm"),
+    "hand_r": ("righthand", "r_hand", "hand_r", "rhand"),
+    "upper_arm_l": ("leftarm", "leftupperarm", "l_upperarm", "humerus_l", "lshldr"),
+    "forearm_l": ("leftforearm", "leftlowerarm", "l_forearm", "radius_l", "lforearm"),
+    "hand_l": ("lefthand", "l_hand", "hand_l", "lhand"),
+    "thigh_r": ("rightupleg", "rightupperleg", "r_thigh", "femur_r", "rthigh"),
+    "shank_r": ("rightleg", "rightlowerleg", "r_shin", "tibia_r", "rshin"),
+    "foot_r": ("rightfoot", "r_foot", "calcn_r", "rfoot"),
+    "thigh_l": ("leftupleg", "leftupperleg", "l_thigh", "femur_l", "lthigh"),
+    "shank_l": ("leftleg", "leftlowerleg", "l_shin", "tibia_l", "lshin"),
+    "foot_l": ("leftfoot", "l_foot", "calcn_l", "lfoot"),
+}
+_UNITS = ((1.0, "m"), (0.01, "cm"), (0.0254, "in"), (0.001, "mm"))
+
+
+def from_bvh(path: str | object, segments: tuple[str, ...]) -> tuple[HumanMotion, list[str]]:
+    """From a BVH file (y up, as BVH has it; the unit told from the leg length, with a
+    note): joint names mapped to human segments (:data:`BVH_NAMES`), forward kinematics,
+    the rest pose as the neutral one (arms turned down first when the rest is a T-pose)."""
+    from mocapkit.body.skeleton import local_rotations
+    from mocapkit.geometry import quat_mul, quat_rotate
+    from mocapkit.io.bvh import read_bvh
+
+    motion = read_bvh(path)  # type: ignore[arg-type]
+    joints = motion.joints
+    key = {j.name.split(":")[-1].lower(): i for i, j in enumerate(joints)}
+    index: dict[str, int] = {}
+    for seg in segments:
+        hit = next((key[n] for n in BVH_NAMES.get(seg, ()) if n in key), None)
+        if hit is None:
+            raise DataError(
+                f"{path}: no BVH joint for the human segment {seg!r} (looked for "
+                f"{', '.join(BVH_NAMES.get(seg, ()))}); its joints: "
+                f"{', '.join(j.name for j in joints)}"
+            )
+        index[seg] = hit
+    local = local_rotations(motion)
+    n = motion.n_frames
+    up = np.array([0.70710678, 0.70710678, 0.0, 0.0])  # y up -> z up (+90 deg about x)
+    q_w = np.zeros((len(joints), n, 4))
+    p_w = np.zeros((len(joints), n, 3))
+    q_rest = np.zeros((len(joints), 4))
+    p_rest = np.zeros((len(joints), 3))
+    for i, j in enumerate(joints):
+        lq = local.get(j.name, np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)))
+        if j.parent < 0:
+            pos_ch = [c for c in j.channels if c.endswith("position")]
+            p = j.offset + (motion.joint_channels(j.name)[:, [j.channels.index(c) for c in pos_ch]]
+                            if len(pos_ch) == 3 else 0.0)  # fmt: skip
+            p = np.broadcast_to(p, (n, 3)) if np.ndim(p) == 1 else p
+            q_w[i] = quat_mul(np.broadcast_to(up, (n, 4)), lq)
+            p_w[i] = quat_rotate(up, p)
+            q_rest[i] = up
+            p_rest[i] = quat_rotate(up, j.offset)
+        else:
+            q_w[i] = quat_mul(q_w[j.parent], lq)
+            p_w[i] = p_w[j.parent] + quat_rotate(q_w[j.parent], np.broadcast_to(j.offset, (n, 3)))
+            q_rest[i] = q_rest[j.parent]
+            p_rest[i] = p_rest[j.parent] + quat_rotate(q_rest[j.parent], j.offset)
+    # the unit: the one that makes the legs 0.5-1.2 m long
+    legs = [s for s in ("thigh_r", "foot_r") if s in index]
+    notes = []
+    scale = 1.0
+    if len(legs) == 2:
+        leg = float(np.linalg.norm(p_rest[index["thigh_r"]] - p_rest[index["foot_r"]]))
+        for s, unit in _UNITS:
+            if 0.5 <= leg * s <= 1.2:
+                scale = s
+                notes.append(f"{path}: BVH lengths read as {unit} (leg {leg * s:.2f} m)")
+                break
+        else:
+            notes.append(f"{path}: leg length {leg:.3g} in file units fits no unit; taken as m")
+    pos = {s: p_w[i] * scale for s, i in index.items()}
+    quat = {s: q_w[i] for s, i in index.items()}
+    n_pos = {s: p_rest[i] * scale for s, i in index.items()}
+    n_quat = {s: q_rest[i].copy() for s, i in index.items()}
+    _arms_down(n_pos, n_quat, notes)
+    ground = _ground_height(pos)
+    sole = min((v[2] for k, v in n_pos.items() if k.startswith("foot")), default=0.0)
+    t = np.arange(n, dtype=np.float64) * float(motion.frame_time)
+    return HumanMotion(
+        time=t,
+        pos={s: p - [0.0, 0.0, ground] for s, p in pos.items()},
+        quat=quat,
+        neutral_pos={s: p - [0.0, 0.0, sole - 0.04] for s, p in n_pos.items()},
+        neutral_quat=n_quat,
+        source="BVH",
+    ), notes
+
+
+def _arms_down(pos: dict[str, FloatArray], quat: dict[str, FloatArray], notes: list[str]) -> None:
+    """A rest pose with the arms out (T-pose) is turned arms-down (the neutral the robots'
+    reference postures share), about each shoulder."""
+    from mocapkit.geometry import quat_from_two_vectors, quat_mul, quat_rotate
+
+    for side in ("r", "l"):
+        arm = [f"upper_arm_{side}", f"forearm_{side}", f"hand_{side}"]
+        if not all(a in pos for a in arm[:2]):
+            continue
+        d = pos[arm[1]] - pos[arm[0]]
+        down = np.array([0.0, 0.0, -1.0])
+        if float(d @ down) / max(float(np.linalg.norm(d)), 1e-9) > np.cos(np.radians(30.0)):
+            continue
+        fix = quat_from_two_vectors(d, down)
+        origin = pos[arm[0]].copy()
+        for a in arm:
+            if a in pos:
+                pos[a] = origin + quat_rotate(fix, pos[a] - origin)
+                quat[a] = quat_mul(fix, quat[a])
+        notes.append(f"the BVH rest pose holds the {'right' if side == 'r' else 'left'} arm out: "
+                     "turned down for the neutral pose")  # fmt: skip

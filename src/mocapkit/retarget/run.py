@@ -1,9 +1,9 @@
 """Retarget a recording onto a humanoid, end to end, and write the robot trajectory.
 
 Inputs: a marker trial (C3D/TRC: reconstructed on the way), joint angles on OpenSim's
-coordinate names (.mot/.sto), or an inertial recording (through the body model, automatic
-calibration). Outputs by extension: ``.csv`` (time, base position and quaternion
-[w, x, y, z], joints [rad]), ``.npz`` (the same arrays with names), ``.mcap`` (Foxglove:
+coordinate names (.mot/.sto), a BVH (common joint names), or an inertial recording
+(through the body model, automatic calibration). Outputs by extension: ``.csv`` (time,
+base position and quaternion [w, x, y, z], joints [rad]), ``.npz`` (the same arrays with names), ``.mcap`` (Foxglove:
 ``/robot/joints`` joint positions, ``/robot/tf`` the frame tree world -> base -> every
 link with real translations, ``/robot/targets`` the keypoint targets; wall-clock
 timestamps from when the file is written).
@@ -54,6 +54,10 @@ def load_human(
 
         rec = mocapkit.reconstruct(path, height_m=height_m)
         return from_reconstruction(rec, segments), list(rec.warnings)
+    if suffix == ".bvh":
+        from mocapkit.retarget.human import from_bvh
+
+        return from_bvh(path, segments)
     if suffix in ANGLE_SUFFIXES:
         from mocapkit.io.joint_angles_mot import read_joint_angles_mot
 
