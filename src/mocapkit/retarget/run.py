@@ -3,10 +3,10 @@
 Inputs: a marker trial (C3D/TRC: reconstructed on the way), joint angles on OpenSim's
 coordinate names (.mot/.sto), a BVH (common joint names), or an inertial recording
 (through the body model, automatic calibration). Outputs by extension: ``.csv`` (time,
-base position and quaternion [w, x, y, z], joints [rad]), ``.npz`` (the same arrays with names), ``.mcap`` (Foxglove:
-``/robot/joints`` joint positions, ``/robot/tf`` the frame tree world -> base -> every
-link with real translations, ``/robot/targets`` the keypoint targets; wall-clock
-timestamps from when the file is written).
+base position and quaternion [w, x, y, z], joints [rad]), ``.npz`` (the same arrays with
+names), ``.mcap`` (Foxglove: ``/robot/joints`` joint positions, ``/robot/tf`` the frame
+tree world -> base -> every link with real translations, ``/robot/targets`` the keypoint
+targets; wall-clock timestamps from when the file is written).
 """
 
 from __future__ import annotations
