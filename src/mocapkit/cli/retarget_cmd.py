@@ -3,7 +3,7 @@
 mocapkit retarget INPUT --robot g1 -o robot.csv [--json]
 
 INPUT: a marker trial (C3D/TRC, reconstructed on the way), joint angles (.mot/.sto on
-OpenSim's coordinate names) or an inertial recording (through the body model). The robot:
+OpenSim's coordinate names), a BVH, or an inertial recording (through the body model). The robot:
 a packaged name (``mocapkit robot list``) or a YAML file (docs/robots.md).
 """
 
