@@ -90,7 +90,7 @@ def register(sub: Any) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
-        "input", help="C3D/TRC marker trial, .mot/.sto joint angles, or an IMU recording"
+        "input", help="C3D/TRC marker trial, .mot/.sto joint angles, a BVH, or an IMU recording"
     )
     p.add_argument("--robot", required=True, help="packaged robot name or a robot YAML file")
     p.add_argument(
