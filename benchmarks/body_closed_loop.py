@@ -158,7 +158,8 @@ def main() -> None:
         "heading is its own, so a pose calibration folds that heading into the mounting: "
         "the 6D mounting errors measure that, not a wrong placement; the automatic "
         "calibration in 6D aligns the headings from the pose (heading_alignment=pose; an "
-        "earlier version of this table used 'shared' there, which is wrong for 6D).\n\n" + "\n".join(lines)
+        "earlier version of this table used 'shared' there, which is wrong for 6D).\n\n"
+        + "\n".join(lines)
     )
     print(text)
     if args.write_docs:
