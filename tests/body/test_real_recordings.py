@@ -191,3 +191,19 @@ def test_ximu3_with_our_own_filter_agrees_with_the_devices(ximu3: BodyResult) ->
         y = np.rad2deg(np.interp(a.time, b.time, b.column(name)))
         # measured 0.9-2.4 deg; two different fusions of the same sensors
         assert np.sqrt(np.mean((x - y) ** 2)) < 4.0, name
+
+
+def test_body_angles_6d_aligns_headings_from_the_pose(shared_data):
+    """With a 6D filter each sensor has its own heading: the CLI's automatic calibration
+    aligns them from the pose unless told otherwise (the shared option is wrong there)."""
+    import json
+    import subprocess
+    import sys
+
+    rec = shared_data / "ximu3-lower-body"
+    base = [sys.executable, "-m", "mocapkit", "body", "angles", str(rec), "--preset",
+            "lower_body", "--filter", "polaris-body", "--json"]  # fmt: skip
+    for mode, expected in (("6d", "pose"), ("9d", "shared")):
+        p = subprocess.run([*base, "--mode", mode], capture_output=True, text=True, check=False)
+        assert p.returncode == 0, p.stderr
+        assert json.loads(p.stdout)["calibration"]["heading_alignment"] == expected

@@ -99,15 +99,23 @@ def test_angles_on_the_ximu3_directory_with_a_filter(
 def test_raw_samples_through_a_6d_filter_report_what_no_human_does(
     shared_data: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """The 15-IMU recording's raw samples through polaris 6D: each sensor's heading
-    drifts on its own, and joints come out no human reaches (a forearm pronated 250 deg).
-    Before, exit 0 and nothing said; now each such coordinate is named with its sensor."""
+    """The 15-IMU recording's raw samples through polaris 6D, calibrated as if the
+    sensors shared one heading (the wrong option for 6D, given explicitly): joints come
+    out no human reaches (a forearm pronated 250 deg), and each such coordinate is named
+    with its sensor. With the default for 6D (headings aligned from the pose) the same
+    recording gives no implausible joint."""
     import warnings
 
     from mocapkit.body.plausibility import ImplausibleAnglesWarning
 
     rec = shared_data / "full-body-15-imu" / "full_body_example_data.mat"
     argv = ["body", "angles", str(rec), "--filter", "polaris", "--mode", "6d"]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert main([*argv, "--start", "40.3", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["implausible"] == []
+    assert not [w for w in caught if w.category is ImplausibleAnglesWarning]
+    argv += ["--heading-alignment", "shared"]
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         assert main([*argv, "--start", "40.3", "--json"]) == 0

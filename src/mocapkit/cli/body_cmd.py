@@ -136,9 +136,12 @@ def _cmd_angles(args: argparse.Namespace) -> int:
     if args.calibration_in:
         calibration = BodyCalibration.from_dict(json.loads(Path(args.calibration_in).read_text()))
     else:
+        alignment = args.heading_alignment
+        if alignment is None:  # 6D filters give each sensor its own heading
+            alignment = "pose" if (args.filter and args.mode == "6d") else "shared"
         kwargs = {
             "heading": heading,
-            "heading_alignment": args.heading_alignment,
+            "heading_alignment": alignment,
             "root_reference": args.root_reference,
         }
     t0 = time.perf_counter()
@@ -274,8 +277,10 @@ def register(subparsers: Any) -> None:
     a.add_argument(
         "--heading-alignment",
         choices=("shared", "pose"),
-        default="shared",
-        help="how the sensors' headings are aligned at calibration",
+        default=None,
+        help="how the sensors' headings are aligned at calibration: shared (one world "
+        "heading: 9D, device orientations) or pose (each sensor's own, aligned from the "
+        "held pose); default pose with --filter ... --mode 6d, else shared",
     )
     a.add_argument(
         "--root-reference",
