@@ -75,7 +75,9 @@ def load_human(
     from mocapkit.cli.body_cmd import _load_orientations
 
     oris = _load_orientations(path, "auto")
-    res = run_body(SensorTree.preset(preset), oris, calibration="auto")
+    # qmt files have no magnetometer: their sensors' headings are each their own
+    align = "pose" if path.suffix.lower() == ".mat" else "shared"
+    res = run_body(SensorTree.preset(preset), oris, calibration="auto", heading_alignment=align)
     a = res.body.angles
     coords = {n: a.column(n) for n in a.names}
     note = (
