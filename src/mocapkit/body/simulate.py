@@ -11,7 +11,7 @@ its raw samples (``mocapkit.imu.simulate``).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -20,7 +20,7 @@ from mocapkit.body.calibration import pose_coordinates, q_world_ground
 from mocapkit.body.joint_angles import compose_pose
 from mocapkit.body.sensor_tree import SensorTree
 from mocapkit.geometry import quat_exp, quat_mul, quat_rotate
-from mocapkit.imu.simulate import ImuErrorModel, simulate_imu
+from mocapkit.imu.simulate import ImuErrorModel, MagDisturbance, simulate_imu
 from mocapkit.series import ImuRecording, PoseSeries
 
 # Sagittal gait pattern (deg): mean, amplitude, phase [cycles] against the right hip.
@@ -137,10 +137,12 @@ def virtual_suit(
     *,
     max_mount_deg: float = 30.0,
     errors: ImuErrorModel | None = None,
+    disturbances: Mapping[str, Sequence[MagDisturbance]] | None = None,
 ) -> tuple[dict[str, ImuRecording], dict[str, FloatArray]]:
     """One IMU per segment, at the segment's middle, mounted up to ``max_mount_deg`` off
     the segment's axes (a random axis each): ({sensor: raw samples}, {segment:
-    q_segment_sensor}). ``errors`` defaults to consumer grade."""
+    q_segment_sensor}). ``errors`` defaults to consumer grade; ``disturbances``: magnetic
+    disturbances per segment name (e.g. the feet near a steel floor)."""
     errors = ImuErrorModel.consumer_grade() if errors is None else errors
     recs, mounts = {}, {}
     for seg in tree.segments:
@@ -152,6 +154,9 @@ def virtual_suit(
         middle = 0.5 * np.asarray(seg.end, dtype=float)
         p = pose.pos + quat_rotate(pose.quat, np.tile(middle, (pose.time.size, 1)))
         sensor_pose = PoseSeries(pose.time, quat_mul(pose.quat, mount), p, name=seg.sensor)
-        recs[seg.sensor] = simulate_imu(sensor_pose, errors, rng=rng, name=seg.sensor)
+        dist = tuple((disturbances or {}).get(seg.name, ()))
+        recs[seg.sensor] = simulate_imu(
+            sensor_pose, errors, disturbances=dist, rng=rng, name=seg.sensor
+        )
         mounts[seg.name] = mount
     return recs, mounts
