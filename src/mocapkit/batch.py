@@ -1,7 +1,7 @@
 """Batch processing of many recordings with the single-file commands (``mocapkit batch``).
 
 Each input is one task: the single-file command (``markers reconstruct``, ``imu run``,
-``body angles``) run in a worker on that file, its output written to the output
+``body angles``, ``retarget``) run in a worker on that file, its output written to the output
 directory under the input's name. The engines:
 
 - ``local`` (default): a pool of worker processes on this machine, started with
@@ -48,6 +48,12 @@ KINDS: dict[str, tuple[tuple[str, ...], str, Callable[[str, str], list[str]]]] =
         (".mat", ".sto", ".csv"),
         ".mot",
         lambda src, out: ["body", "angles", src, "-o", out, "--json"],
+    ),
+    # the robot comes after '--' (--robot g1); the trajectory as CSV
+    "retarget": (
+        (".c3d", ".trc", ".mot", ".bvh"),
+        ".csv",
+        lambda src, out: ["retarget", src, "-o", out, "--json"],
     ),
 }
 MANIFEST = "manifest.jsonl"

@@ -90,3 +90,36 @@ def test_ray_batch_with_a_broken_file(
     argv = ["batch", "markers", str(corpus), "-o", str(out), "--workers", "2", "--json"]
     assert main([*argv, "--engine", "ray"]) == 1
     _check(json.loads(capsys.readouterr().out), out)
+
+
+def test_batch_retarget_passes_the_robot_through_args(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    """``mocapkit batch retarget DIR -o OUT --args '--robot g1'``: every joint-angle file
+    onto G1, one CSV each, the options reaching the single-file command."""
+    pytest.importorskip("proxsuite", reason="the robots extra")
+    import numpy as np
+
+    from mocapkit.body.sensor_tree import SensorTree
+    from mocapkit.body.simulate import gait_coordinates
+    from mocapkit.io.joint_angles_mot import write_joint_angles_mot
+    from mocapkit.series import JointAngleSeries
+
+    src = tmp_path / "in"
+    src.mkdir()
+    tree = SensorTree.preset("full_body_15")
+    for k, speed in enumerate((0.8, 1.2)):
+        t, coords, _ = gait_coordinates(tree, duration_s=2.0, still_s=0.5)
+        coords = dict(coords)
+        coords.update(pelvis_tx=speed * np.clip(t - 0.5, 0, None), pelvis_ty=np.full_like(t, 0.93),
+                      pelvis_tz=np.zeros_like(t))  # fmt: skip
+        names = tuple(coords)
+        values = np.column_stack([coords[n] for n in names])
+        write_joint_angles_mot(src / f"walk{k}.mot", JointAngleSeries(t, names, values))
+    out = tmp_path / "out"
+    code = main(["batch", "retarget", str(src), "-o", str(out), "--args", "--robot g1", "--json"])
+    report = json.loads(capsys.readouterr().out)
+    assert code == 0, report
+    assert (report["files"], report["ok"]) == (2, 2)
+    header = (out / "walk0.csv").read_text().splitlines()[0]
+    assert "left_knee_joint" in header
+    rows = [json.loads(line) for line in (out / MANIFEST).read_text().splitlines()]
+    assert all(r["figures"]["robot"] == "g1" for r in rows)

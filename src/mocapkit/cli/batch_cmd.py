@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 from typing import Any
 
@@ -11,11 +12,13 @@ from mocapkit.cli.common import EXIT_ERROR, EXIT_OK, print_json
 _EXAMPLES = """\
 examples:
   mocapkit batch markers ../shared/data/c3d -o out/markers --workers 2 --json
-  mocapkit batch imu 'recordings/*.csv' -o out/imu -- --filter polaris
+  mocapkit batch imu 'recordings/*.csv' -o out/imu --args '--filter polaris'
   mocapkit batch body @sessions.txt -o out/body --engine ray --ray-address auto
+  mocapkit batch retarget ../shared/data/c3d -o out/g1 --workers 2 --args '--robot g1'
 
-Options after '--' go to the single-file command (markers reconstruct, imu run, body
-angles) for every input. Outputs are <input name>.mot/.sto in OUTDIR with a
+Options in --args (or after a '--' among the inputs) go to the single-file command
+(markers reconstruct, imu run, body angles, retarget) for every input. Outputs are
+<input name>.mot/.sto/.csv in OUTDIR with a
 manifest.jsonl (one line per file: input, output, ok, seconds, figures, error); a rerun
 skips inputs whose output is newer (--force redoes them); a failing file is reported and
 the batch goes on (exit 1 at the end if any failed).
@@ -29,7 +32,9 @@ def register(sub: Any) -> None:
         epilog=_EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("kind", choices=["markers", "imu", "body"], help="which command to run")
+    p.add_argument(
+        "kind", choices=["markers", "imu", "body", "retarget"], help="which command to run"
+    )
     p.add_argument(
         "inputs", nargs="+", help="files, directories, globs ('*.c3d') or @list.txt files"
     )
@@ -43,6 +48,13 @@ def register(sub: Any) -> None:
     )
     p.add_argument("--ray-address", default=None, help="a Ray cluster (default: a local one)")
     p.add_argument("--force", action="store_true", help="redo inputs whose output exists")
+    p.add_argument(
+        "--args",
+        default="",
+        metavar="'OPTIONS'",
+        help="options for the single-file command, quoted as one word (e.g. "
+        "--args '--robot g1'); options after a '--' among the inputs work too",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON summary")
     p.set_defaults(func=_batch)
 
@@ -56,7 +68,7 @@ def _batch(args: argparse.Namespace) -> int:
     if "--" in inputs:  # argparse keeps a '--' inside nargs='+'
         cut = inputs.index("--")
         inputs, extra = inputs[:cut], inputs[cut + 1 :]
-    extra += list(getattr(args, "extra", []) or [])
+    extra += shlex.split(args.args) if args.args else []
     with StepProgress() as bars:
 
         def report(row: dict[str, Any], n_done: int, n_total: int) -> None:
