@@ -3,6 +3,7 @@ answers: the robot YAML checks, standing still, limits, contacts, heading, colli
 
 from __future__ import annotations
 
+import itertools
 import json
 import subprocess
 import sys
@@ -343,3 +344,28 @@ def test_bvh_input_gives_the_segments_it_was_written_from(tmp_path):
     f = evaluate(g1, make_targets(motion, g1), sol)
     assert f["limit_violations"] == {"position": 0, "velocity": 0}
     assert f["keypoint_rmse_mm"]["mean"] < 40.0
+
+
+def test_live_retargeting_frame_by_frame_keeps_the_limits():
+    """The live path (one frame of joint angles in, one configuration out) on a walk:
+    every configuration finite, within the position limits, steps within the velocity
+    limits; the heading alignment of the first frame is kept."""
+    import pinocchio as pin
+
+    from mocapkit.retarget.live import LiveRetargeter
+
+    tree = SensorTree.preset("full_body_15")
+    t, coords, _ = gait_coordinates(tree, duration_s=3.0, still_s=0.5)
+    live = LiveRetargeter("g1")
+    qs = np.array([live.update({c: v[k] for c, v in coords.items()}, float(t[k]))
+                   for k in range(t.size)])  # fmt: skip
+    robot = live.robot
+    assert np.isfinite(qs).all()
+    iq, iv = robot.iq, robot.iv
+    assert (qs[:, iq] >= robot.q_min[iq] - 1e-9).all()
+    assert (qs[:, iq] <= robot.q_max[iq] + 1e-9).all()
+    v = np.array([pin.difference(robot.model, a, b) for a, b in itertools.pairwise(qs)])
+    assert (np.abs(v[1:, iv]) / np.diff(t)[1:, None] <= robot.v_max[iv] * 1.001).all()
+    start = live.start
+    live.update({c: v[0] for c, v in coords.items()}, float(t[-1] + 0.01))
+    assert live.start is start

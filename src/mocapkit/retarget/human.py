@@ -15,6 +15,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
 
 import numpy as np
 
@@ -104,15 +106,26 @@ def _ground_height(pos: Mapping[str, FloatArray]) -> float:
     return float(np.nanpercentile(np.concatenate(feet), 2.0)) - 0.04
 
 
+@lru_cache(maxsize=1)
+def _skeleton() -> tuple[object, dict[str, object]]:
+    """The ``full_body_15`` tree and its segments standing at all-zero coordinates."""
+    from mocapkit.body.sensor_tree import SensorTree
+    from mocapkit.body.simulate import segment_poses
+
+    tree = SensorTree.preset("full_body_15")
+    zero = {c: np.zeros(1) for c in tree.coordinate_names}
+    return tree, dict(segment_poses(tree, np.zeros(1), zero, speed=0.0))
+
+
 def from_coordinates(
     time: FloatArray, coords: Mapping[str, FloatArray], segments: tuple[str, ...]
 ) -> HumanMotion:
     """From joint angles on OpenSim's coordinate names (rad; ``pelvis_t?`` in m, OpenSim's
     y-up ground) through the ``full_body_15`` skeleton."""
-    from mocapkit.body.sensor_tree import SensorTree
     from mocapkit.body.simulate import segment_poses
 
-    tree = SensorTree.preset("full_body_15")
+    tree_obj, neutral = _skeleton()
+    tree: Any = tree_obj
     n = time.size
     use = {c: np.nan_to_num(np.asarray(coords[c], dtype=float)) for c in tree.coordinate_names
            if c in coords}  # fmt: skip
@@ -121,8 +134,6 @@ def from_coordinates(
         raise DataError(f"joint angles: no {', '.join(missing_root)}; the pelvis is needed")
     full = {c: use.get(c, np.zeros(n)) for c in tree.coordinate_names}
     poses = segment_poses(tree, time, full, speed=0.0)
-    zero = {c: np.zeros(1) for c in tree.coordinate_names}
-    neutral = segment_poses(tree, np.zeros(1), zero, speed=0.0)
     # OpenSim ground (x fwd, y up, z right) -> ours (x fwd, y left, z up)
     trans = np.zeros((n, 3))
     if all(c in coords for c in ("pelvis_tx", "pelvis_ty", "pelvis_tz")):
@@ -141,8 +152,8 @@ def from_coordinates(
         p = poses[inverse[s]]
         pos[s] = p.pos + trans
         quat[s] = p.quat
-        n_pos[s] = neutral[inverse[s]].pos[0]
-        n_quat[s] = neutral[inverse[s]].quat[0]
+        n_pos[s] = neutral[inverse[s]].pos[0]  # type: ignore[attr-defined]
+        n_quat[s] = neutral[inverse[s]].quat[0]  # type: ignore[attr-defined]
     sole = min((v[2] for k, v in n_pos.items() if k.startswith("foot")), default=0.0)
     ground = _ground_height(pos)
     return HumanMotion(

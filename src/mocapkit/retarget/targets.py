@@ -72,6 +72,7 @@ class Targets:
     contact: dict[str, np.ndarray]  # foot segment -> (N,) bool
     scale: dict[str, float]  # keypoint segment -> bone scale
     belt: FloatArray  # (2,) treadmill belt velocity removed [m/s] (zero: overground)
+    start: tuple[FloatArray, FloatArray] | None = None  # heading alignment and origin used
 
 
 def _ancestor(segment: str, keypoints: set[str]) -> str | None:
@@ -124,7 +125,17 @@ def detect_contacts(motion: HumanMotion, foot: str) -> np.ndarray:
     return out
 
 
-def make_targets(motion: HumanMotion, robot: Humanoid) -> Targets:
+def make_targets(
+    motion: HumanMotion,
+    robot: Humanoid,
+    *,
+    start: tuple[FloatArray, FloatArray] | None = None,
+    contact: dict[str, np.ndarray] | None = None,
+) -> Targets:
+    """Targets for every frame of ``motion`` (module docstring). ``start``: the heading
+    alignment (3, 3) and origin (3,) to use instead of the first frame's (a live stream
+    keeps its first frame's); ``contact``: the feet's contact flags instead of detecting
+    them (a live stream detects them as it goes). The alignment used is ``Targets.start``."""
     import pinocchio as pin
 
     spec = robot.spec
@@ -139,7 +150,7 @@ def make_targets(motion: HumanMotion, robot: Humanoid) -> Targets:
             f"robot {spec.name} needs the human segment(s) {', '.join(missing)}, which this "
             f"motion ({motion.source}) does not have"
         )
-    belt = belt_velocity(motion, sorted(feet))
+    belt = belt_velocity(motion, sorted(feet)) if contact is None else np.zeros(2)
     if belt.any():
         import warnings
 
@@ -168,6 +179,8 @@ def make_targets(motion: HumanMotion, robot: Humanoid) -> Targets:
     fwd = quat_to_matrix(motion.quat["pelvis"][0]) @ (r_pel_n.T @ np.array([1.0, 0.0, 0.0]))
     align = _yaw(-float(np.arctan2(fwd[1], fwd[0])))
     origin = motion.pos["pelvis"][0] * [1.0, 1.0, 0.0]
+    if start is not None:
+        align, origin = start
     pos_h = {s: (motion.pos[s] - origin) @ align.T for s in need}
     rot_h = {s: align @ quat_to_matrix(motion.quat[s]) for s in need}
     n_pos = {s: motion.neutral_pos[s] for s in need}
@@ -206,5 +219,6 @@ def make_targets(motion: HumanMotion, robot: Humanoid) -> Targets:
     for s in kps:
         delta = rot_h[s] @ n_rot[s].T  # the human's rotation away from neutral (world)
         rot_t[s] = delta @ ref_rot[s]
-    contact = {f: detect_contacts(motion, f) for f in feet}
-    return Targets(motion.time, pos_t, rot_t, contact, scale, belt)
+    if contact is None:
+        contact = {f: detect_contacts(motion, f) for f in feet}
+    return Targets(motion.time, pos_t, rot_t, contact, scale, belt, (align, origin))
