@@ -28,8 +28,8 @@ CONTACT_HEIGHT_M = 0.03
 
 class LiveRetargeter:
     def __init__(self, robot: str | Path | Humanoid, rate_hz: float = 100.0) -> None:
-        self.robot = robot if isinstance(robot, Humanoid) else build_humanoid(
-            load_robot_spec(robot)
+        self.robot = (
+            robot if isinstance(robot, Humanoid) else build_humanoid(load_robot_spec(robot))
         )
         spec = self.robot.spec
         self.segments = tuple(sorted({k.segment for k in spec.keypoints}
