@@ -102,10 +102,14 @@ class FilterParams:
         acc_range: accelerometer full-scale range [m/s^2], or None (unknown).
         gyr_range: gyroscope full-scale range [rad/s], or None (unknown; a flat-topped
             gyroscope axis is still detected as clipped).
-        gap_factor: a time step longer than this many nominal steps is a time gap
-            (missing samples, a clock jump): held over one nominal step and warned about,
-            never integrated; ``polaris`` re-acquires its orientation after it. Shorter
-            steps (a few dropped packets) are integrated over their true length.
+        gap_factor: a time step longer than this many nominal steps (and than
+            ``max_integrated_gap_s``) is a time gap (missing samples, a clock jump): held
+            over one nominal step and warned about, never integrated; ``polaris``
+            re-acquires its orientation after it. Shorter steps (a few dropped packets)
+            are integrated over their true length.
+        max_integrated_gap_s: lost packets up to this long [s] are integrated with the
+            next reading rather than held (a limb's rate hardly changes in a quarter of a
+            second; holding loses the rotation, for good without a magnetometer).
     """
 
     rate_hz: float
@@ -113,6 +117,7 @@ class FilterParams:
     acc_range: float | None = None
     gyr_range: float | None = None
     gap_factor: float = 5.0
+    max_integrated_gap_s: float = 0.25
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.rate_hz) and self.rate_hz > 0):
@@ -316,7 +321,10 @@ class OrientationFilter(ABC):
 
     def _prepare(self, gyr: Any, acc: Any, mag: Any, dt: Any) -> tuple[FilterInputs, RunReport]:
         p = self.params
-        return prepare_inputs(gyr, acc, mag, dt, p.dt, p.acc_range, p.gyr_range, p.gap_factor)
+        return prepare_inputs(
+            gyr, acc, mag, dt, p.dt, p.acc_range, p.gyr_range, p.gap_factor,
+            p.max_integrated_gap_s,
+        )  # fmt: skip
 
     def _initialise_from(self, inputs: FilterInputs) -> None:
         k = min(self.params.init_samples, inputs.gyr.shape[0])

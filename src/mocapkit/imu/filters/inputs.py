@@ -101,14 +101,17 @@ def _dt_array(dt: Any, n: int, default: float) -> FloatArray:
 
 
 def hold_time_gaps(
-    steps: FloatArray, default_dt: float, gap_factor: float
+    steps: FloatArray, default_dt: float, gap_factor: float, integrate_s: float = 0.0
 ) -> tuple[FloatArray, np.ndarray, tuple[tuple[int, float], ...]]:
-    """Time steps longer than ``gap_factor`` nominal steps are gaps (missing samples, a
-    clock that jumped): what the sensor turned through in them is unknown, so integrating
-    the next reading over the whole gap would be wrong by an arbitrary rotation. Such a
-    step is replaced by the nominal one (the gap is held) and warned about, naming the
-    sample and the length. Returns ``(steps, gap_mask, ((sample, seconds), ...))``."""
-    mask = steps > gap_factor * default_dt
+    """Time steps longer than ``gap_factor`` nominal steps and than ``integrate_s`` are
+    gaps (missing samples, a clock that jumped): what the sensor turned through in them is
+    unknown, so integrating the next reading over the whole gap would be wrong by an
+    arbitrary rotation. Such a step is replaced by the nominal one (the gap is held) and
+    warned about, naming the sample and the length. Shorter steps (a few lost packets: a
+    limb's rate hardly changes in a quarter second) are integrated over their true length:
+    holding them would lose the rotation, for good in 6D. Returns ``(steps, gap_mask,
+    ((sample, seconds), ...))``."""
+    mask = steps > max(gap_factor * default_dt, integrate_s)
     if not mask.any():
         return steps, mask, ()
     where = np.flatnonzero(mask)
@@ -116,7 +119,7 @@ def hold_time_gaps(
     first, length = gaps[0]
     warnings.warn(
         f"dt: time gap of {length:.3g} s before sample {first} ({len(gaps)} gap(s) longer than "
-        f"{gap_factor:g} nominal steps of {default_dt:.3g} s); held, not integrated: the "
+        f"{max(gap_factor * default_dt, integrate_s):.3g} s); held, not integrated: the "
         "filter re-acquires its orientation after it (polaris) or carries it across. "
         "Check the recording's clock or fill the gap if the samples exist.",
         TimeGapWarning,
@@ -158,6 +161,7 @@ def prepare_inputs(
     acc_range: float | None = None,
     gyr_range: float | None = None,
     gap_factor: float = math.inf,
+    integrate_s: float = 0.0,
 ) -> tuple[FilterInputs, RunReport]:
     """Validate a batch and build the kernels' inputs and the report (see base.py's
     module docstring for every case). ``default_dt`` [s] is used when ``dt`` is None;
@@ -173,7 +177,7 @@ def prepare_inputs(
     inputs, report = fast
     if not math.isfinite(gap_factor) or inputs.dt.size == 0:
         return fast
-    steps, gap, gaps = hold_time_gaps(inputs.dt, default_dt, gap_factor)
+    steps, gap, gaps = hold_time_gaps(inputs.dt, default_dt, gap_factor, integrate_s)
     if not gaps:
         return fast
     inputs = inputs._replace(dt=np.ascontiguousarray(steps), gap=gap)
