@@ -80,7 +80,7 @@ def synthetic(seeds: int) -> list[str]:
 
 
 def real() -> list[str]:
-    from mocapkit.cli.body_identify_cmd import load_for_identify
+    from mocapkit.body.recordings import load_for_identify
 
     cases = [
         ("x-IMU3 lower body", "lower_body", SHARED / "ximu3-lower-body", "polaris-body", None),

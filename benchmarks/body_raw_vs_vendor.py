@@ -23,8 +23,8 @@ import numpy as np
 
 from benchmarks._docs import write_section
 from mocapkit.body.pipeline import run_body
+from mocapkit.body.recordings import load_orientations
 from mocapkit.body.sensor_tree import SensorTree
-from mocapkit.cli.body_cmd import _load_orientations
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 # label, path, tree, start [s], has a magnetometer (else every source is 6D: headings
@@ -48,11 +48,11 @@ def compare(
 ) -> dict[str, tuple[float, str, float]]:
     tree = SensorTree.preset(preset)
     fmt = "qmt-mat" if path.suffix == ".mat" else "device"
-    vendor = _angles(tree, _load_orientations(path, fmt), start, "shared" if has_mag else "pose")
+    vendor = _angles(tree, load_orientations(path, fmt), start, "shared" if has_mag else "pose")
     out = {}
     for name, mode in SOURCES:
         align = "shared" if (has_mag and mode == "9d") else "pose"
-        raw = _angles(tree, _load_orientations(path, fmt, name, mode), start, align)
+        raw = _angles(tree, load_orientations(path, fmt, name, mode), start, align)
         diffs = {}
         for coord in vendor.names:
             if coord == "pelvis_rotation" or coord not in raw.names:

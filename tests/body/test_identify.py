@@ -182,7 +182,7 @@ def _real(shared: Path, case: str) -> tuple[SensorTree, Path]:
 def test_real_recordings_with_labels_removed(shared_data, case):
     import xml.etree.ElementTree as ET
 
-    from mocapkit.cli.body_identify_cmd import load_for_identify
+    from mocapkit.body.recordings import load_for_identify
 
     tree, path = _real(shared_data, case)
     oris, raw, headings, _ = load_for_identify(path, "auto", "polaris-body", None)

@@ -15,68 +15,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+from mocapkit.body.recordings import FORMATS, load_orientations
 from mocapkit.cli.common import EXIT_OK, print_json
 from mocapkit.errors import ConfigError
-from mocapkit.series import OrientationSeries
 
 log = logging.getLogger("mocapkit.body")
-
-_FORMATS = ("auto", "qmt-mat", "opensense-sto", "device")
-
-
-def _format(path: Path, fmt: str) -> str:
-    if fmt != "auto":
-        return fmt
-    if path.suffix.lower() == ".mat":
-        return "qmt-mat"
-    if path.suffix.lower() in (".sto", ".mot"):
-        return "opensense-sto"
-    if path.is_dir():
-        return "device"
-    raise ConfigError(
-        f"{path}: cannot tell the recording format from its name; give --format "
-        f"({', '.join(_FORMATS[1:])})"
-    )
-
-
-def _load_orientations(
-    path: Path, fmt: str, filter_name: str | None = None, mode: str = "9d"
-) -> dict[str, OrientationSeries]:
-    """Sensor orientations from a recording (dispatch to the io readers): the recording's
-    own orientations, or those of a mocapkit filter run on its raw samples."""
-    if not path.exists():
-        raise FileNotFoundError(f"{path}: no such file or directory")
-    fmt = _format(path, fmt)
-    if filter_name is not None:
-        from mocapkit.imu.filters.base import make_filter
-        from mocapkit.series import ImuRecording
-
-        recs: dict[str, ImuRecording]
-        if fmt == "qmt-mat":
-            from mocapkit.io.qmt_mat import read_qmt_mat
-
-            recs = dict(read_qmt_mat(path).imu)
-        elif fmt == "opensense-sto":
-            raise ConfigError(f"{path}: an orientation table has no raw samples to filter")
-        else:
-            from mocapkit.io.imu_files import read_imu_recordings
-
-            recs = read_imu_recordings(path)
-        return {
-            name: make_filter(filter_name, rec.rate_hz).run_recording(rec, use_mag=mode == "9d")
-            for name, rec in recs.items()
-        }
-    if fmt == "qmt-mat":
-        from mocapkit.io.qmt_mat import read_qmt_mat
-
-        return dict(read_qmt_mat(path).orientation)
-    if fmt == "device":
-        from mocapkit.io.imu_files import read_device_orientations
-
-        return read_device_orientations(path)
-    from mocapkit.io.opensense import read_orientations_sto
-
-    return read_orientations_sto(path)
 
 
 def _parse_map(items: list[str]) -> dict[str, str]:
@@ -122,8 +65,8 @@ def _cmd_angles(args: argparse.Namespace) -> int:
         tree = tree.with_sensor_names({str(k): str(v) for k, v in mapping.items()})
     if args.map:
         tree = tree.with_sensor_names(_parse_map(args.map))
-    orientations = _load_orientations(Path(args.recording), args.format, args.filter, args.mode)
-    placement = _load_orientations(Path(args.placement), args.format) if args.placement else None
+    orientations = load_orientations(Path(args.recording), args.format, args.filter, args.mode)
+    placement = load_orientations(Path(args.placement), args.format) if args.placement else None
     heading: HeadingFixed | HeadingFromSensor | None = None
     if args.heading_sensor:
         heading = HeadingFromSensor(args.heading_sensor, args.heading_axis)
@@ -241,7 +184,7 @@ def register(subparsers: Any) -> None:
     a.add_argument("recording", help="recording file")
     a.add_argument(
         "--format",
-        choices=_FORMATS,
+        choices=FORMATS,
         default="auto",
         help="device: an x-IMU3 export directory or Xsens exports (their own orientations)",
     )

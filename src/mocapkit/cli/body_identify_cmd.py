@@ -14,76 +14,12 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from mocapkit.cli.common import EXIT_ERROR, EXIT_OK, print_json
+from mocapkit.body.recordings import FORMATS, load_for_identify
+from mocapkit.cli.common import EXIT_ERROR, EXIT_OK, print_json, process_seconds
 from mocapkit.errors import ConfigError
-from mocapkit.series import OrientationSeries
-
-DEVICE = "device"
-
-
-def load_for_identify(
-    path: Path, fmt: str, filter_name: str, mode: str | None
-) -> tuple[dict[str, OrientationSeries], Mapping[str, Any] | None, str, str]:
-    """(orientations, raw samples with ``acc`` or None, headings, what was used)."""
-    from mocapkit.cli.body_cmd import _format
-
-    if not path.exists():
-        raise FileNotFoundError(f"{path}: no such file or directory")
-    fmt = _format(path, fmt)
-    if fmt == "opensense-sto":
-        from mocapkit.io.opensense import read_orientations_sto
-
-        return read_orientations_sto(path), None, "shared", "the file's orientations"
-    if fmt == "device" and _is_xsens_without_gyro(path):
-        from mocapkit.io.imu_files import read_xsens_directory
-
-        ex = read_xsens_directory(path)
-        oris = {k: e.orientation for k, e in ex.items()}
-        return oris, ex, "shared", "the devices' orientations and accelerometers"
-    if fmt == "qmt-mat":
-        from mocapkit.io.qmt_mat import read_qmt_mat
-
-        rec = read_qmt_mat(path)
-        recs = dict(rec.imu)
-        device = dict(rec.orientation)
-    else:
-        from mocapkit.io.imu_files import read_device_orientations, read_imu_recordings
-
-        recs = read_imu_recordings(path)
-        device = read_device_orientations(path) if filter_name == DEVICE else {}
-    if filter_name == DEVICE:
-        from mocapkit.body.identify import align_sensor_frames
-
-        aligned = {k: align_sensor_frames(device[k], recs[k], k) for k in device if k in recs}
-        return device, aligned, "shared", "the devices' orientations and accelerometers"
-    from mocapkit.imu.filters.base import make_filter
-
-    has_mag = all(r.has_mag for r in recs.values())
-    mode = mode or ("9d" if has_mag else "6d")
-    if mode == "9d" and not has_mag:
-        raise ConfigError(
-            f"{path}: --mode 9d needs magnetometer samples, and some sensors have none; "
-            "use --mode 6d"
-        )
-    oris = {
-        k: make_filter(filter_name, r.rate_hz).run_recording(r, use_mag=mode == "9d")
-        for k, r in recs.items()
-    }
-    headings = "shared" if mode == "9d" else "independent"
-    return oris, recs, headings, f"{filter_name} {mode} on the raw samples"
-
-
-def _is_xsens_without_gyro(path: Path) -> bool:
-    from mocapkit.io.imu_files import _is_xsens_dir, read_xsens_directory
-
-    if not (path.is_dir() and _is_xsens_dir(path)):
-        return False
-    return any(e.gyr is None for e in read_xsens_directory(path).values())
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
@@ -93,7 +29,6 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     from mocapkit.cli.body_cmd import _parse_map
 
     tree = SensorTree.from_yaml(args.tree) if args.tree else SensorTree.preset(args.preset)
-    t0 = time.perf_counter()
     oris, raw, headings, used = load_for_identify(
         Path(args.recording), args.format, args.filter, args.mode
     )
@@ -112,7 +47,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         oris = crop(oris, args.start, args.stop)
     known = _parse_map(args.known) if args.known else None
     result = identify(tree, oris, raw, headings=headings, known=known)
-    elapsed = time.perf_counter() - t0
+    elapsed = process_seconds()  # the whole command, as the user's stopwatch sees it
     if args.output:
         Path(args.output).write_text(json.dumps(result.mapping, indent=2) + "\n")
     if args.json:
@@ -152,7 +87,7 @@ def register(sub: Any) -> None:
     p.add_argument("recording", help="recording file or export directory")
     p.add_argument(
         "--format",
-        choices=("auto", "qmt-mat", "opensense-sto", "device"),
+        choices=FORMATS,
         default="auto",
         help="recording format (default: from the name)",
     )

@@ -11,11 +11,10 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
 from typing import Any
 
-from mocapkit.cli.common import EXIT_OK, print_json
+from mocapkit.cli.common import EXIT_OK, print_json, process_seconds
 
 _EXAMPLES = """\
 examples:
@@ -27,23 +26,17 @@ examples:
 
 
 def _cmd(args: argparse.Namespace) -> int:
-    from mocapkit.retarget.run import OUTPUT_SUFFIXES, retarget, write_trajectory
+    from mocapkit.retarget.run import check_output, retarget, write_trajectory
 
-    t0 = time.perf_counter()
-    if args.output and Path(args.output).suffix.lower() not in OUTPUT_SUFFIXES:
-        from mocapkit.errors import ConfigError
-
-        raise ConfigError(
-            f"-o {args.output}: expected one of {', '.join(OUTPUT_SUFFIXES)} (the extension "
-            "picks the format)"
-        )
+    if args.output:
+        check_output(Path(args.output))  # before the work, not after it
     res = retarget(
         args.input, args.robot, height_m=args.height, preset=args.preset,
         check_collisions=not args.no_collision_check, avoid_collisions=args.avoid_collisions,
     )  # fmt: skip
     if args.output:
         write_trajectory(args.output, res)
-    seconds = time.perf_counter() - t0
+    seconds = process_seconds()  # the whole command, as the user's stopwatch sees it
     n = res.solution.time.size
     f = res.figures
     report = {

@@ -81,29 +81,41 @@ def from_reconstruction(rec: object, segments: tuple[str, ...]) -> HumanMotion:
     pin.framesForwardKinematics(model, data, q0[: model.nq])
     n_pos = {s: np.array(data.oMf[f].translation) for s, f in ids.items()}
     n_rot = {s: np.array(data.oMf[f].rotation) for s, f in ids.items()}
-    ground = _ground_height(pos)
-    sole0 = (
-        min(n_pos[s][2] for s in n_pos if s.startswith(("foot", "toes")))
-        if any(s.startswith(("foot", "toes")) for s in n_pos)
-        else 0.0
-    )
-    return HumanMotion(
-        time=np.asarray(result.time, dtype=float),
-        pos={s: p - [0.0, 0.0, ground] for s, p in pos.items()},
-        quat={s: quat_from_matrix(r) for s, r in rot.items()},
-        neutral_pos={s: p - [0.0, 0.0, sole0 - 0.04] for s, p in n_pos.items()},
-        neutral_quat={s: quat_from_matrix(r) for s, r in n_rot.items()},
-        source="markers",
+    return _on_the_ground(
+        np.asarray(result.time, dtype=float),
+        pos,
+        {s: quat_from_matrix(r) for s, r in rot.items()},
+        n_pos,
+        {s: quat_from_matrix(r) for s, r in n_rot.items()},
+        "markers",
     )
 
 
-def _ground_height(pos: Mapping[str, FloatArray]) -> float:
-    """The ground under the feet: a low percentile of the foot segments' heights, less the
-    ankle's height above the sole (4 cm)."""
+ANKLE_HEIGHT_M = 0.04  # the foot segments' origin (ankle) above the sole
+
+
+def _on_the_ground(
+    time: FloatArray,
+    pos: Mapping[str, FloatArray],
+    quat: dict[str, FloatArray],
+    n_pos: Mapping[str, FloatArray],
+    n_quat: dict[str, FloatArray],
+    source: str,
+) -> HumanMotion:
+    """The motion with its ground at z = 0 (a low percentile of the feet's heights, less
+    the ankle's height) and its neutral pose standing on z = 0."""
     feet = [p[:, 2] for s, p in pos.items() if s.startswith("foot")]
-    if not feet:
-        return 0.0
-    return float(np.nanpercentile(np.concatenate(feet), 2.0)) - 0.04
+    ground = float(np.nanpercentile(np.concatenate(feet), 2.0)) - ANKLE_HEIGHT_M if feet else 0.0
+    soles = [p[2] for s, p in n_pos.items() if s.startswith(("foot", "toes"))]
+    sole = (min(soles) - ANKLE_HEIGHT_M) if soles else -ANKLE_HEIGHT_M
+    return HumanMotion(
+        time=time,
+        pos={s: p - [0.0, 0.0, ground] for s, p in pos.items()},
+        quat=quat,
+        neutral_pos={s: p - [0.0, 0.0, sole] for s, p in n_pos.items()},
+        neutral_quat=n_quat,
+        source=source,
+    )
 
 
 @lru_cache(maxsize=1)
@@ -154,16 +166,7 @@ def from_coordinates(
         quat[s] = p.quat
         n_pos[s] = neutral[inverse[s]].pos[0]  # type: ignore[attr-defined]
         n_quat[s] = neutral[inverse[s]].quat[0]  # type: ignore[attr-defined]
-    sole = min((v[2] for k, v in n_pos.items() if k.startswith("foot")), default=0.0)
-    ground = _ground_height(pos)
-    return HumanMotion(
-        time=np.asarray(time, dtype=float),
-        pos={s: p - [0.0, 0.0, ground] for s, p in pos.items()},
-        quat=quat,
-        neutral_pos={s: p - [0.0, 0.0, sole - 0.04] for s, p in n_pos.items()},
-        neutral_quat=n_quat,
-        source="joint angles",
-    )
+    return _on_the_ground(np.asarray(time, dtype=float), pos, quat, n_pos, n_quat, "joint angles")
 
 
 # BVH joint names (lower case, any "prefix:" dropped) -> human segments
@@ -249,17 +252,8 @@ def from_bvh(path: str | object, segments: tuple[str, ...]) -> tuple[HumanMotion
     n_pos = {s: p_rest[i] * scale for s, i in index.items()}
     n_quat = {s: q_rest[i].copy() for s, i in index.items()}
     _arms_down(n_pos, n_quat, notes)
-    ground = _ground_height(pos)
-    sole = min((v[2] for k, v in n_pos.items() if k.startswith("foot")), default=0.0)
     t = np.arange(n, dtype=np.float64) * float(motion.frame_time)
-    return HumanMotion(
-        time=t,
-        pos={s: p - [0.0, 0.0, ground] for s, p in pos.items()},
-        quat=quat,
-        neutral_pos={s: p - [0.0, 0.0, sole - 0.04] for s, p in n_pos.items()},
-        neutral_quat=n_quat,
-        source="BVH",
-    ), notes
+    return _on_the_ground(t, pos, quat, n_pos, n_quat, "BVH"), notes
 
 
 def _arms_down(pos: dict[str, FloatArray], quat: dict[str, FloatArray], notes: list[str]) -> None:

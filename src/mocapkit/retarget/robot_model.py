@@ -31,6 +31,8 @@ class Humanoid:
     iv: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     # iq/iv: q and v indices of the one-DOF joints (revolute, prismatic) that carry the
     # position and velocity limits; continuous joints (nq 2, nv 1) have no position limit
+    ref_pose: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
+    # ref_pose: every named frame's (position, rotation) in the reference posture, once
 
     @property
     def n_base_q(self) -> int:
@@ -136,3 +138,4 @@ def _stand(h: Humanoid) -> None:
         pin.framesForwardKinematics(h.model, h.data, h.q_ref)
         lateral = np.array([0.0, 1.0, 0.0])
     h.lateral = lateral
+    h.ref_pose = {f: h.frame_pose(f) for f in h.frame_ids}

@@ -11,7 +11,6 @@ targets; wall-clock timestamps from when the file is written).
 
 from __future__ import annotations
 
-import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -71,10 +70,10 @@ def load_human(
             )
         return from_coordinates(a.time, coords, segments), notes
     from mocapkit.body.pipeline import run_body
+    from mocapkit.body.recordings import load_orientations
     from mocapkit.body.sensor_tree import SensorTree
-    from mocapkit.cli.body_cmd import _load_orientations
 
-    oris = _load_orientations(path, "auto")
+    oris = load_orientations(path)
     # qmt files have no magnetometer: their sensors' headings are each their own
     align = "pose" if path.suffix.lower() == ".mat" else "shared"
     res = run_body(SensorTree.preset(preset), oris, calibration="auto", heading_alignment=align)
@@ -123,18 +122,32 @@ def retarget(
     if coll is not None and not coll.available:
         notes.append(f"self-collisions not checked: {coll.reason}")
     figures = evaluate(humanoid, targets, sol, coll)
+    hits = figures["collisions"]["frames"]
+    if hits:  # exit 0 must not hide a trajectory that drives the robot into itself
+        pairs = "; ".join(figures["collisions"]["pairs"])
+        notes.append(
+            f"{hits} of {sol.time.size} frames have the robot's bodies intersecting ({pairs}):"
+            " do not play it on the robot as it is"
+            + ("" if avoid_collisions else "; --avoid-collisions keeps them apart")
+        )
     return Retargeted(humanoid, motion, targets, sol, figures, notes)
 
 
-def write_trajectory(path: str | Path, result: Retargeted) -> Path:
-    """``.csv`` or ``.npz`` (module docstring)."""
-    p = Path(path)
-    suffix = p.suffix.lower()
+def check_output(path: Path) -> str:
+    """The output format (its suffix), or a refusal naming the ones there are."""
+    suffix = path.suffix.lower()
     if suffix not in OUTPUT_SUFFIXES:
         raise ConfigError(
-            f"output {p}: expected one of {', '.join(OUTPUT_SUFFIXES)} (the extension picks "
-            "the format)"
+            f"output {path}: expected one of {', '.join(OUTPUT_SUFFIXES)} (the extension "
+            "picks the format)"
         )
+    return suffix
+
+
+def write_trajectory(path: str | Path, result: Retargeted) -> Path:
+    """``.csv``, ``.npz`` or ``.mcap`` (module docstring)."""
+    p = Path(path)
+    suffix = check_output(p)
     robot = result.robot
     sol = result.solution
     nb = robot.n_base_q
@@ -154,12 +167,6 @@ def write_trajectory(path: str | Path, result: Retargeted) -> Path:
     table = np.column_stack([sol.time, base, q])
     np.savetxt(p, table, delimiter=",", header=header, comments="", fmt="%.9g")
     return p
-
-
-def timed_retarget(*args: Any, **kwargs: Any) -> tuple[Retargeted, float]:
-    t0 = time.perf_counter()
-    out = retarget(*args, **kwargs)
-    return out, time.perf_counter() - t0
 
 
 def _write_mcap(path: Path, result: Retargeted) -> Path:

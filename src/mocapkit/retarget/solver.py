@@ -23,7 +23,7 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.retarget.collisions import SphereAvoidance
 from mocapkit.retarget.robot_model import Humanoid
-from mocapkit.retarget.targets import Targets
+from mocapkit.retarget.targets import Targets, yaw_matrix
 
 CONTACT_WEIGHT = 50.0
 SMOOTH = 0.05
@@ -75,10 +75,7 @@ class FrameSolver:
         self.anchors: dict[str, tuple[FloatArray, FloatArray]] = {}
         self.kp = [(k, robot.frame_ids[k.frame]) for k in robot.spec.keypoints]
         self.q_pred = self.q.copy()  # constant-velocity prediction of this frame
-        import pinocchio as pin
-
-        pin.framesForwardKinematics(m, robot.data, robot.q_ref)
-        self.foot_ref = {f.segment: robot.frame_pose(f.frame)[1] for f in robot.spec.feet}
+        self.foot_ref = {f.segment: robot.ref_pose[f.frame][1] for f in robot.spec.feet}
         self.feet = [(f, robot.frame_ids[f.frame]) for f in robot.spec.feet]
         dt = np.diff(targets.time)
         self.dt = float(np.median(dt)) if dt.size else 0.01
@@ -213,8 +210,7 @@ class FrameSolver:
         """The foot's reference orientation (flat) turned to the heading of ``r``."""
         r_ref = self.foot_ref[foot]
         yaw = np.arctan2(r[1, 0], r[0, 0]) - np.arctan2(r_ref[1, 0], r_ref[0, 0])
-        c, s = np.cos(yaw), np.sin(yaw)
-        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ r_ref
+        return yaw_matrix(float(yaw)) @ r_ref
 
     def _bounds(
         self, nb: int, q_start: FloatArray | None, dt: float

@@ -93,7 +93,8 @@ def _order(keypoints: set[str]) -> list[str]:
     return sorted(keypoints, key=depth)
 
 
-def _yaw(rot: float) -> FloatArray:
+def yaw_matrix(rot: float) -> FloatArray:
+    """(3, 3) rotation by ``rot`` [rad] about the vertical."""
     c, s = np.cos(rot), np.sin(rot)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
@@ -136,7 +137,6 @@ def make_targets(
     alignment (3, 3) and origin (3,) to use instead of the first frame's (a live stream
     keeps its first frame's); ``contact``: the feet's contact flags instead of detecting
     them (a live stream detects them as it goes). The alignment used is ``Targets.start``."""
-    import pinocchio as pin
 
     spec = robot.spec
     kps = {k.segment for k in spec.keypoints}
@@ -167,17 +167,16 @@ def make_targets(
             motion.time, {s: p + shift for s, p in motion.pos.items()}, motion.quat,
             motion.neutral_pos, motion.neutral_quat, motion.source,
         )  # fmt: skip
-    pin.framesForwardKinematics(robot.model, robot.data, robot.q_ref)
     frame_of = {k.segment: k.frame for k in spec.keypoints}  # (feet's sole frames apart)
     if not spec.floating_base:  # the fixed root stands for the pelvis
         frame_of["pelvis"] = str(spec.root_frame)
-    ref_pos = {s: robot.frame_pose(f)[0] for s, f in frame_of.items()}
-    ref_rot = {s: robot.frame_pose(f)[1] for s, f in frame_of.items()}
+    ref_pos = {s: robot.ref_pose[f][0] for s, f in frame_of.items()}
+    ref_rot = {s: robot.ref_pose[f][1] for s, f in frame_of.items()}
 
     # start and heading: the human pelvis at frame 0 -> the robot's, facing +x
     r_pel_n = quat_to_matrix(motion.neutral_quat["pelvis"])
     fwd = quat_to_matrix(motion.quat["pelvis"][0]) @ (r_pel_n.T @ np.array([1.0, 0.0, 0.0]))
-    align = _yaw(-float(np.arctan2(fwd[1], fwd[0])))
+    align = yaw_matrix(-float(np.arctan2(fwd[1], fwd[0])))
     origin = motion.pos["pelvis"][0] * [1.0, 1.0, 0.0]
     if start is not None:
         align, origin = start
