@@ -163,23 +163,69 @@ def test_self_collision_is_counted(g1):
     assert any("left" in a or "left" in b for a, b in hits)
 
 
-def test_avoidance_keeps_a_hand_out_of_the_torso(g1):
-    """A hand target inside the torso: without avoidance the arm is in the torso in every
-    frame; with it, in at most 10 % of them (spheres around the meshes: bodies already
-    close at rest, like G1's shoulders and torso, are only kept from getting closer than
-    at rest, which the meshes can still reach: measured 6 of 120)."""
-    from mocapkit.retarget.collisions import SelfCollision, SphereAvoidance
-
-    targets = make_targets(_standing(n=120), g1)
+def _hand_in_torso(g1, n=120):
+    targets = make_targets(_standing(n=n), g1)
     inside = targets.pos["thorax"][0] if "thorax" in targets.pos else targets.pos["pelvis"][0]
     targets.pos["hand_l"][:] = inside + np.array([0.05, 0.0, 0.15])
+    return targets
+
+
+def test_guard_keeps_a_hand_out_of_the_torso(g1):
+    """A hand target inside the torso: without the guard the arm is in the torso in every
+    frame; with it in none (checked on the meshes), the limits held, the hand as near
+    its target as the torso allows."""
+    from mocapkit.retarget.collisions import SelfCollision
+
+    targets = _hand_in_torso(g1)
     sc = SelfCollision(g1)
     plain = evaluate(g1, targets, solve(g1, targets), sc)
-    kept = solve(g1, targets, SphereAvoidance(sc))
-    avoided = evaluate(g1, targets, kept, sc)
+    sol = solve(g1, targets, guard=sc)
+    guarded = evaluate(g1, targets, sol, sc)
     assert plain["collisions"]["frames"] == 120
+    assert guarded["collisions"]["frames"] == 0
+    assert all(sc.colliding(q) == [] for q in sol.q)
+    assert guarded["limit_violations"] == {"position": 0, "velocity": 0}
+    assert sol.kept_apart or sol.stopped  # the guard acted, and says so
+    gap = np.linalg.norm(sol.keypoint_pos["hand_l"] - targets.pos["hand_l"], axis=1)
+    assert float(np.median(gap)) < 0.25  # pressed against the torso, not thrown away
+
+
+def test_hull_rows_keep_a_hand_out_of_the_torso(g1):
+    """The avoidance rows alone (convex hulls, soft): in at most 10 % of the frames the
+    meshes still touch (linearised rows; the guard removes the rest)."""
+    from mocapkit.retarget.collisions import HullAvoidance, SelfCollision
+
+    targets = _hand_in_torso(g1)
+    sc = SelfCollision(g1)
+    avoided = evaluate(g1, targets, solve(g1, targets, HullAvoidance(sc)), sc)
     assert avoided["collisions"]["frames"] <= 12
     assert avoided["limit_violations"] == {"position": 0, "velocity": 0}
+
+
+def test_hull_distance_never_exceeds_the_mesh_distance(g1):
+    """The rows rely on a hull containing its mesh: on random postures the hulls' distance
+    is never larger than the meshes' (within coal's tolerance)."""
+    import pinocchio as pin
+
+    from mocapkit.retarget.collisions import SelfCollision
+
+    sc = SelfCollision(g1)
+    rng = np.random.default_rng(3)
+    hd = sc.hm.createData()
+    checked = 0
+    for _ in range(15):
+        q = g1.q_ref.copy()
+        q[g1.iq] = np.clip(q[g1.iq] + rng.normal(0, 0.3, g1.iq.size), g1.q_min[g1.iq],
+                           g1.q_max[g1.iq])  # fmt: skip
+        pin.forwardKinematics(g1.model, sc.data, q)
+        cand = sc._candidates(0.03)[:4]
+        pin.updateGeometryPlacements(g1.model, sc.data, sc.hm, hd)
+        for k in cand:
+            d_hull = pin.computeDistance(sc.hm, hd, int(k)).min_distance
+            d_mesh = pin.computeDistance(sc.gm, sc.gd, int(k)).min_distance
+            assert d_hull <= d_mesh + 1e-4
+            checked += 1
+    assert checked > 10
 
 
 def test_cli_retarget_writes_a_trajectory_and_reports(tmp_path):

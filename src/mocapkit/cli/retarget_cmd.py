@@ -33,6 +33,7 @@ def _cmd(args: argparse.Namespace) -> int:
     res = retarget(
         args.input, args.robot, height_m=args.height, preset=args.preset,
         check_collisions=not args.no_collision_check, avoid_collisions=args.avoid_collisions,
+        guard_collisions=not args.allow_collisions,
     )  # fmt: skip
     if args.output:
         write_trajectory(args.output, res)
@@ -55,6 +56,10 @@ def _cmd(args: argparse.Namespace) -> int:
         "limit_violations": f["limit_violations"],
         "collisions": f["collisions"],
         "held_frames": f["held_frames"],
+        "collision_guard": {
+            "steered": len(res.solution.kept_apart),
+            "stopped_short": len(res.solution.stopped),
+        },
         "notes": res.notes,
         "output": args.output,
     }
@@ -101,8 +106,15 @@ def register(sub: Any) -> None:
     p.add_argument(
         "--avoid-collisions",
         action="store_true",
-        help="keep the robot's bodies apart in the QP (experimental: spheres around the "
-        "meshes; ~3x slower; frames where it cannot hold are solved without it, warned)",
+        help="also keep spheres around the robot's bodies apart in every frame's QP "
+        "(smoother near contact; ~3x slower)",
+    )
+    p.add_argument(
+        "--allow-collisions",
+        action="store_true",
+        help="turn off the collision guard (default on: every frame checked on the meshes, "
+        "a colliding step steered round or stopped short); collisions are then counted "
+        "and warned",
     )
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.set_defaults(func=_cmd)

@@ -49,17 +49,14 @@ def quat_mul(q1: Any, q2: Any) -> FloatArray:
     """Hamilton product ``q1 * q2`` (apply q2 first, then q1 when rotating vectors)."""
     a = _quat(q1, "q1")
     b = _quat(q2, "q2")
-    w1, x1, y1, z1 = np.moveaxis(a, -1, 0)
-    w2, x2, y2, z2 = np.moveaxis(b, -1, 0)
-    return np.stack(
-        [
-            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-        ],
-        axis=-1,
-    )
+    w1, x1, y1, z1 = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    w2, x2, y2, z2 = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))  # no stack: small inputs are many
+    out[..., 0] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
+    out[..., 1] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
+    out[..., 2] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
+    out[..., 3] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
+    return out
 
 
 def quat_conj(q: Any) -> FloatArray:
@@ -103,8 +100,18 @@ def quat_rotate(q: Any, v: Any) -> FloatArray:
     w = qa[..., :1]
     u = qa[..., 1:]
     # v' = v + 2 w (u x v) + 2 u x (u x v), valid for unit q
-    t = 2.0 * np.cross(u, va)
-    return va + w * t + np.cross(u, t)
+    t = 2.0 * _cross(u, va)
+    return va + w * t + _cross(u, t)
+
+
+def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``np.cross`` on the last axis with its arithmetic (the same bits), without its
+    axis bookkeeping (which dominates on small inputs)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
 
 
 def quat_rotate_inv(q: Any, v: Any) -> FloatArray:
@@ -114,16 +121,22 @@ def quat_rotate_inv(q: Any, v: Any) -> FloatArray:
 
 def quat_to_matrix(q: Any) -> FloatArray:
     """Rotation matrix (..., 3, 3) of a unit quaternion; ``R @ v == quat_rotate(q, v)``."""
-    w, x, y, z = np.moveaxis(_quat(q), -1, 0)
+    qa = _quat(q)
+    w, x, y, z = qa[..., 0], qa[..., 1], qa[..., 2], qa[..., 3]
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z
-    rows = [
-        [1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)],
-        [2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx)],
-        [2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)],
-    ]
-    return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+    out = np.empty((*qa.shape[:-1], 3, 3))
+    out[..., 0, 0] = 1 - 2 * (yy + zz)
+    out[..., 0, 1] = 2 * (xy - wz)
+    out[..., 0, 2] = 2 * (xz + wy)
+    out[..., 1, 0] = 2 * (xy + wz)
+    out[..., 1, 1] = 1 - 2 * (xx + zz)
+    out[..., 1, 2] = 2 * (yz - wx)
+    out[..., 2, 0] = 2 * (xz - wy)
+    out[..., 2, 1] = 2 * (yz + wx)
+    out[..., 2, 2] = 1 - 2 * (xx + yy)
+    return out
 
 
 def quat_from_matrix(R: Any) -> FloatArray:

@@ -6,6 +6,8 @@ OpenSim's coordinate names (what ``body.kinematics.BodyStream`` gives) and retur
 robot's configuration (nq,). The first frame fixes the heading alignment; an IMU suit has
 no positions, so the pelvis stays where it starts. Feet: in contact while the foot is
 within 3 cm of the lower foot (heights from the skeleton), so the stance foot is held.
+Self-collisions: the offline guard (``solver`` docstring) on every frame, unless
+``guard=False``.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit._validate import FloatArray
+from mocapkit.retarget.collisions import SelfCollision
 from mocapkit.retarget.human import from_coordinates
 from mocapkit.retarget.robot_model import Humanoid, build_humanoid
 from mocapkit.retarget.robot_spec import load_robot_spec
@@ -24,13 +27,18 @@ from mocapkit.retarget.solver import FrameSolver
 from mocapkit.retarget.targets import make_targets
 
 CONTACT_HEIGHT_M = 0.03
+LIVE_BISECTIONS = 3  # the guard cuts a colliding step to 1/8 steps (offline 1/64): time
 
 
 class LiveRetargeter:
-    def __init__(self, robot: str | Path | Humanoid, rate_hz: float = 100.0) -> None:
+    def __init__(
+        self, robot: str | Path | Humanoid, rate_hz: float = 100.0, *, guard: bool = True
+    ) -> None:
         self.robot = (
             robot if isinstance(robot, Humanoid) else build_humanoid(load_robot_spec(robot))
         )
+        # every frame checked on the meshes, a colliding step steered round or stopped short
+        self.guard = SelfCollision(self.robot) if guard else None
         spec = self.robot.spec
         self.segments = tuple(sorted({k.segment for k in spec.keypoints}
                                      | {f.segment for f in spec.feet} | {"pelvis"}))  # fmt: skip
@@ -53,7 +61,8 @@ class LiveRetargeter:
         if self.start is None:
             self.start = targets.start
         if self.solver is None:
-            self.solver = FrameSolver(self.robot, targets)
+            self.solver = FrameSolver(self.robot, targets, guard=self.guard)
+            self.solver.bisections = LIVE_BISECTIONS
         else:
             self.solver.targets = targets
         if self.t_last is not None and t > self.t_last:

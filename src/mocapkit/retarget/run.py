@@ -94,11 +94,14 @@ def retarget(
     preset: str = "full_body_15",
     check_collisions: bool = True,
     avoid_collisions: bool = False,
+    guard_collisions: bool = True,
 ) -> Retargeted:
     """``input_path`` onto ``robot`` (a packaged name or a YAML): targets, one QP per
-    frame, and the figures of :mod:`mocapkit.retarget.metrics`. ``avoid_collisions``:
-    keep the bodies apart in the QP (experimental: spheres around the meshes; slower, and
-    frames where it cannot be met with the limits are solved without it, warned)."""
+    frame, and the figures of :mod:`mocapkit.retarget.metrics`. ``guard_collisions``
+    (default): every frame checked on the robot's meshes, a colliding step steered round or
+    stopped short (``solver`` docstring), so no frame has bodies intersecting.
+    ``avoid_collisions``: in addition, rows in every frame's QP keep spheres around the
+    bodies apart (smoother near contact, ~3x slower)."""
     from mocapkit.retarget.collisions import SelfCollision
     from mocapkit.retarget.metrics import evaluate
 
@@ -111,13 +114,14 @@ def retarget(
         warnings.simplefilter("always", RetargetWarning)
         targets = make_targets(motion, humanoid)
     notes += [str(w.message) for w in caught]
-    coll = SelfCollision(humanoid) if (check_collisions or avoid_collisions) else None
+    wanted = check_collisions or avoid_collisions or guard_collisions
+    coll = SelfCollision(humanoid) if wanted else None
     avoid = None
     if avoid_collisions and coll is not None:
-        from mocapkit.retarget.collisions import SphereAvoidance
+        from mocapkit.retarget.collisions import HullAvoidance
 
-        avoid = SphereAvoidance(coll)
-    sol = solve(humanoid, targets, avoid)
+        avoid = HullAvoidance(coll)
+    sol = solve(humanoid, targets, avoid, coll if guard_collisions else None)
     notes += sol.warnings
     if coll is not None and not coll.available:
         notes.append(f"self-collisions not checked: {coll.reason}")
@@ -128,7 +132,7 @@ def retarget(
         notes.append(
             f"{hits} of {sol.time.size} frames have the robot's bodies intersecting ({pairs}):"
             " do not play it on the robot as it is"
-            + ("" if avoid_collisions else "; --avoid-collisions keeps them apart")
+            + ("" if guard_collisions else "; leave the collision guard on to keep them apart")
         )
     return Retargeted(humanoid, motion, targets, sol, figures, notes)
 

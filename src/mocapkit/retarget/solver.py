@@ -7,21 +7,29 @@ pulls towards the constant-velocity prediction of the frame (the last frame plus
 frame's step), instead of a post-filter; a small pull to the reference posture.
 Constraints: joint position limits and velocity limits as box bounds on ``dq``
 (``v_max * dt``), and every sole point at or above the ground (``z + J_z dq >= 0``).
-With ``avoid`` (``collisions.SphereAvoidance``), soft rows keep the bodies' spheres apart
+With ``avoid`` (``collisions.HullAvoidance``), soft rows keep the bodies' convex hulls apart
 (one slack per row, cost ``AVOID_WEIGHT``). Self-collisions are counted afterwards. Two
 iterations per frame from the previous frame's solution; the first frame is solved from
 the reference posture without the velocity limits (30 iterations, 0.1 rad trust region).
 A frame whose QP has no solution is held, and reported.
+
+The collision guard (``guard``, :class:`collisions.SelfCollision`, on by default in
+``retarget``): every frame's result is checked on the meshes (~0.3 ms for G1); a step
+that makes two bodies intersect is cut back to where they are still apart (bisection from
+the last collision-free configuration, so the limits still hold), then one more QP step
+with the avoidance rows is tried from there and kept only if it is collision-free.
+Frames stopped short are reported. No frame leaves the guard colliding.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from mocapkit._validate import FloatArray
-from mocapkit.retarget.collisions import SphereAvoidance
+from mocapkit.retarget.collisions import HullAvoidance, SelfCollision
 from mocapkit.retarget.robot_model import Humanoid
 from mocapkit.retarget.targets import Targets, yaw_matrix
 
@@ -34,9 +42,9 @@ FIRST_ITERATIONS = 30  # the first frame starts from the reference posture
 FIRST_STEP_RAD = 0.1  # per iteration on the first frame
 VELOCITY_SHARE = 0.99
 AVOID_WEIGHT = 1e4  # cost of a metre of slack on an avoidance row, squared
-GIVE_WAY_M = (
-    0.005  # slack beyond this on a row is reported  # of the velocity limit the steps may use
-)
+GIVE_WAY_M = 0.005  # m: slack beyond this on an avoidance row is reported
+GUARD_BISECTIONS = 6  # halvings of a colliding step (1/64 of it)
+GUARD_ROWS_STEPS = 50  # after the guard acts, the avoidance rows stay in the QP this long
 
 
 @dataclass
@@ -48,6 +56,8 @@ class Solution:
     solve_seconds: float = 0.0
     warnings: list[str] = field(default_factory=list)
     held_frames: list[int] = field(default_factory=list)
+    kept_apart: list[int] = field(default_factory=list)  # steered round a collision
+    stopped: list[int] = field(default_factory=list)  # stopped short to keep bodies apart
 
 
 def _log3(r: FloatArray) -> FloatArray:
@@ -60,8 +70,9 @@ class FrameSolver:
     """The per-frame QP (module docstring); ``step(k, targets)`` solves frame k."""
 
     def __init__(
-        self, robot: Humanoid, targets: Targets, avoid: SphereAvoidance | None = None
-    ) -> None:
+        self, robot: Humanoid, targets: Targets, avoid: HullAvoidance | None = None,
+        guard: SelfCollision | None = None,
+    ) -> None:  # fmt: skip
         self.robot = robot
         self.targets = targets
         m = robot.model
@@ -70,6 +81,14 @@ class FrameSolver:
         self.held: list[int] = []  # frames whose QP had no solution (held)
         self.avoid = avoid if avoid is not None and avoid.available else None
         self.relaxed: list[int] = []  # frames where an avoidance row gave way (slack)
+        self.guard = guard if guard is not None and guard.available and len(guard.pairs) else None
+        self._rows = self.avoid  # avoidance rows for the guard's second try (built lazily)
+        self.kept_apart: list[int] = []  # frames the guard steered round a collision
+        self._qps: dict[tuple[int, int], Any] = {}  # proxsuite dense QPs by size
+        self.n_steps = 0  # frames solved so far
+        self.bisections = GUARD_BISECTIONS  # fewer live (each halving is a mesh check)
+        self.watched: dict[int, int] = {}  # pair the guard parted -> rows in the QP until
+        self.stopped: list[int] = []  # frames the guard stopped short of the targets
         self.q = robot.q_ref.copy()
         self.q_last: FloatArray | None = None
         self.anchors: dict[str, tuple[FloatArray, FloatArray]] = {}
@@ -118,40 +137,26 @@ class FrameSolver:
     def step(self, k: int) -> FloatArray:
         import pinocchio as pin
 
-        m, d = self.robot.model, self.robot.data
-        nb = self.robot.n_base_v
+        m = self.robot.model
         first = self.q_last is None  # the start pose: no velocity limit, solved to rest
         self.k_now = k
         q_start = self.q.copy()
+        self.n_steps += 1
+        # pairs the guard had to part lately keep rows in the QP (hard) for a while
+        self.watched = {p: t for p, t in self.watched.items() if t >= self.n_steps}
+        watched = sorted(self.watched) if self.watched and self.avoid is None else None
+        avoid = self._rows if watched else self.avoid
         for _ in range(FIRST_ITERATIONS if first else ITERATIONS):
-            pin.computeJointJacobians(m, d, self.q)
-            pin.updateFramePlacements(m, d)
-            a, b = self._tasks(k)
-            h = a.T @ a
-            g = -a.T @ b
-            h[np.diag_indices(self.nv)] += (0.0 if first else SMOOTH) + POSTURE + DAMPING
-            if not first:
-                g -= SMOOTH * np.asarray(pin.difference(m, self.q, self.q_pred))
-            post = np.asarray(pin.difference(m, self.q, self.robot.q_ref))
-            g -= POSTURE * post
-            dt = float(self.targets.time[k] - self.targets.time[k - 1]) if k > 0 else self.dt
-            lo, hi = self._bounds(nb, None if first else q_start, dt)
-            if first:  # a trust region: the linearisation holds only near the current pose
-                iv = self.robot.iv
-                lo[iv] = np.maximum(lo[iv], -FIRST_STEP_RAD)
-                hi[iv] = np.minimum(hi[iv], FIRST_STEP_RAD)
-            c, u = self._ground()
-            if self.avoid is not None:
-                ca, ua = self.avoid.rows(self.q)
-                dq = self._solve_with_slack(h, g, c, u, ca, ua, lo, hi)
-            else:
-                dq = self._solve_qp(h, g, c, u, lo, hi)
+            q_before = self.q.copy()
+            dq = self._iteration(k, first, q_start, avoid, hard=bool(watched), pairs=watched)
             if dq is None:  # not even the joints' bounds and the ground together: hold
                 self.held.append(k)
                 break
-            self.q = np.asarray(pin.integrate(m, self.q, dq))
-            iq = self.robot.iq  # the QP meets the box to its tolerance: clip exactly
-            self.q[iq] = np.clip(self.q[iq], self.robot.q_min[iq], self.robot.q_max[iq])
+            self._advance(dq)
+            if first and self._collides():  # the start pose is reached through free space
+                self._keep_apart(k, first, q_before, q_start)
+        if not first and self._collides():
+            self._keep_apart(k, first, q_start, q_start)
         step = (
             np.asarray(pin.difference(m, self.q_last, self.q))
             if self.q_last is not None
@@ -160,6 +165,124 @@ class FrameSolver:
         self.q_last = self.q.copy()
         self.q_pred = np.asarray(pin.integrate(m, self.q, step))
         return self.q
+
+    def _iteration(
+        self, k: int, first: bool, q_start: FloatArray, avoid: HullAvoidance | None,
+        hard: bool = False, pairs: list[int] | None = None,
+    ) -> FloatArray | None:  # fmt: skip
+        """One linearised QP step from ``self.q`` (None: no step meets the constraints);
+        ``hard``: the avoidance rows as constraints (soft only if no step meets them);
+        ``pairs``: rows for these pairs only."""
+        import pinocchio as pin
+
+        m, d = self.robot.model, self.robot.data
+        pin.computeJointJacobians(m, d, self.q)
+        pin.updateFramePlacements(m, d)
+        a, b = self._tasks(k)
+        h = a.T @ a
+        g = -a.T @ b
+        h[np.diag_indices(self.nv)] += (0.0 if first else SMOOTH) + POSTURE + DAMPING
+        if not first:
+            g -= SMOOTH * np.asarray(pin.difference(m, self.q, self.q_pred))
+        g -= POSTURE * np.asarray(pin.difference(m, self.q, self.robot.q_ref))
+        dt = float(self.targets.time[k] - self.targets.time[k - 1]) if k > 0 else self.dt
+        lo, hi = self._bounds(self.robot.n_base_v, None if first else q_start, dt)
+        if first:  # a trust region: the linearisation holds only near the current pose
+            iv = self.robot.iv
+            lo[iv] = np.maximum(lo[iv], -FIRST_STEP_RAD)
+            hi[iv] = np.minimum(hi[iv], FIRST_STEP_RAD)
+        c, u = self._ground()
+        if avoid is not None:
+            ca, ua = avoid.rows(self.q, pairs)
+            if hard:  # the rows as constraints; soft when no step meets them all
+                x = self._solve_qp(h, g, np.vstack([c, ca]), np.concatenate([u, ua]), lo, hi)
+                if x is not None:
+                    return x
+            return self._solve_with_slack(h, g, c, u, ca, ua, lo, hi)
+        return self._solve_qp(h, g, c, u, lo, hi)
+
+    def _advance(self, dq: FloatArray) -> None:
+        import pinocchio as pin
+
+        self.q = np.asarray(pin.integrate(self.robot.model, self.q, dq))
+        iq = self.robot.iq  # the QP meets the box to its tolerance: clip exactly
+        self.q[iq] = np.clip(self.q[iq], self.robot.q_min[iq], self.robot.q_max[iq])
+
+    def _collides(self) -> bool:
+        return self.guard is not None and self.guard.any_colliding(self.q)
+
+    def _keep_apart(self, k: int, first: bool, q_free: FloatArray, q_start: FloatArray) -> None:
+        """``self.q`` collides and ``q_free`` does not: go as far towards ``self.q`` as the
+        bodies allow, then one more step from there with hard avoidance rows (pairs in
+        touch move apart: the step slides along the contact), as far as it stays apart.
+        A frame that ends short of its step is reported (``stopped``)."""
+        assert self.guard is not None
+        q_bad = self.q
+        hit = self.guard.colliding_pairs(q_bad)
+        self.watched.update({p: self.n_steps + GUARD_ROWS_STEPS for p in hit})
+        q_safe = self._last_free(q_free, q_bad)
+        self.q = q_safe
+        if self._rows is None:
+            self._rows = self.avoid or HullAvoidance(self.guard)
+        dq = self._iteration(k, first, q_start, self._rows, hard=True)
+        if dq is not None:
+            self._advance(dq)
+            if not self.guard.any_colliding(self.q):
+                self.kept_apart.append(k)
+                return
+            q_bad = self.q
+            hit = self.guard.colliding_pairs(q_bad)
+        self.stopped.append(k)
+        # stop only the limbs between the bodies in touch; the rest (the base, the other
+        # limbs) goes on, so the robot is not left behind by the human
+        q_limbs = self._limbs_stopped(q_free, q_bad, hit)
+        self.q = q_safe if q_limbs is None else q_limbs
+
+    def _limbs_stopped(
+        self, q_free: FloatArray, q_bad: FloatArray, hit: list[int]
+    ) -> FloatArray | None:
+        """The step ``q_free -> q_bad`` made in full except on the joints between the
+        colliding bodies (cut by bisection); None when that is not collision-free either."""
+        import pinocchio as pin
+
+        assert self.guard is not None
+        m = self.robot.model
+        mask = np.zeros(self.nv, dtype=bool)
+        for j in self.guard.joints_between(hit):
+            mask[m.joints[j].idx_v : m.joints[j].idx_v + m.joints[j].nv] = True
+        if not mask.any():
+            return None
+        step = np.asarray(pin.difference(m, q_free, q_bad))
+        rest = np.where(mask, 0.0, step)
+        q0 = np.asarray(pin.integrate(m, q_free, rest))
+        if self.guard.any_colliding(q0):
+            return None
+        lo, hi = 0.0, 1.0
+        for _ in range(self.bisections):
+            mid = 0.5 * (lo + hi)
+            q_mid = np.asarray(pin.integrate(m, q_free, rest + mid * np.where(mask, step, 0.0)))
+            if self.guard.any_colliding(q_mid):
+                hi = mid
+            else:
+                lo = mid
+        return np.asarray(pin.integrate(m, q_free, rest + lo * np.where(mask, step, 0.0)))
+
+    def _last_free(self, q_free: FloatArray, q_bad: FloatArray) -> FloatArray:
+        """The configuration furthest along ``q_free -> q_bad`` known collision-free
+        (bisection, ``self.bisections`` halvings; the limits hold on the way)."""
+        import pinocchio as pin
+
+        assert self.guard is not None
+        m = self.robot.model
+        step = np.asarray(pin.difference(m, q_free, q_bad))
+        lo, hi = 0.0, 1.0
+        for _ in range(self.bisections):
+            mid = 0.5 * (lo + hi)
+            if self.guard.any_colliding(np.asarray(pin.integrate(m, q_free, mid * step))):
+                hi = mid
+            else:
+                lo = mid
+        return np.asarray(pin.integrate(m, q_free, lo * step))
 
     def _solve_with_slack(
         self, h: FloatArray, g: FloatArray, c: FloatArray, u: FloatArray, ca: FloatArray,
@@ -194,10 +317,16 @@ class FrameSolver:
         """The step, or None when the QP has no solution (the frame is then held)."""
         import proxsuite
 
-        qp = proxsuite.proxqp.dense.QP(len(g), 0, len(u), True)
-        qp.settings.eps_abs = 1e-6
-        qp.settings.verbose = False
-        qp.init(h, g, None, None, c, np.full(len(u), -1e20), u, lo, hi)
+        key = (len(g), len(u))
+        qp = self._qps.get(key)
+        if qp is None:  # one solver per problem size, set up once and updated per step
+            qp = proxsuite.proxqp.dense.QP(len(g), 0, len(u), True)
+            qp.settings.eps_abs = 1e-6
+            qp.settings.verbose = False
+            qp.init(h, g, None, None, c, np.full(len(u), -1e20), u, lo, hi)
+            self._qps[key] = qp
+        else:
+            qp.update(h, g, None, None, c, np.full(len(u), -1e20), u, lo, hi)
         qp.solve()
         x = np.asarray(qp.results.x)
         if qp.results.info.status == proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED and (
@@ -246,19 +375,24 @@ class FrameSolver:
             jac = pin.getFrameJacobian(m, d, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
             # sole point velocity: v + w x (R s)
             arm = oMf.rotation @ foot.sole
-            jz = jac[2] + (np.cross(arm, np.eye(3)[2]) @ jac[3:])
+            jz = jac[2] + arm[1] * jac[3] - arm[0] * jac[4]  # + (arm x e_z) . w
             c[i] = -jz
             u[i] = sole[2]
         return c, u
 
 
-def solve(robot: Humanoid, targets: Targets, avoid: SphereAvoidance | None = None) -> Solution:
-    """Every frame in order (module docstring); with ``avoid``, bodies are kept apart."""
+def solve(
+    robot: Humanoid, targets: Targets, avoid: HullAvoidance | None = None,
+    guard: SelfCollision | None = None,
+) -> Solution:  # fmt: skip
+    """Every frame in order (module docstring); with ``avoid``, bodies are kept apart by
+    rows in every frame's QP; with ``guard``, every frame is checked on the meshes and a
+    colliding step is steered round or stopped short (:meth:`FrameSolver._keep_apart`)."""
     import time
 
     import pinocchio as pin
 
-    solver = FrameSolver(robot, targets, avoid)
+    solver = FrameSolver(robot, targets, avoid, guard)
     n = targets.time.size
     q_out = np.empty((n, robot.model.nq))
     kp_pos = {k.segment: np.empty((n, 3)) for k in robot.spec.keypoints}
@@ -275,10 +409,18 @@ def solve(robot: Humanoid, targets: Targets, avoid: SphereAvoidance | None = Non
             sole_pos[f.segment][k] = m.translation + m.rotation @ f.sole
     sol = Solution(targets.time, q_out, kp_pos, sole_pos, time.perf_counter() - t0)
     sol.held_frames = list(solver.held)
+    sol.kept_apart = sorted(set(solver.kept_apart))
+    sol.stopped = sorted(set(solver.stopped))
     if solver.relaxed:
         sol.warnings.append(
             f"{len(set(solver.relaxed))} frame(s) where collision avoidance gave way (no step "
             f"met it with the limits), first at frame {solver.relaxed[0]}"
+        )
+    if sol.stopped:
+        sol.warnings.append(
+            f"{len(sol.stopped)} frame(s) where the robot stopped short of the human's pose "
+            f"to keep its bodies apart, first at frame {sol.stopped[0]} (t = "
+            f"{targets.time[sol.stopped[0]]:.3f} s): the keypoint errors there are larger"
         )
     if solver.held:
         sol.warnings.append(
