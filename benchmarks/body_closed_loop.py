@@ -17,7 +17,10 @@ truth over the walk [deg], and the mounting error per segment [deg], mean over s
 ``--tree full_body_15`` adds the trunk, head and arms (their coordinates from the same
 reconstruction; the wrists, which its markers do not determine, stay still);
 ``--faults`` adds a steel floor (15 uT on the feet's magnetometers, 6 uT on the shanks'
-while walking) and three lost bursts of 30-80 ms per sensor.
+while walking) and three lost bursts of 30-80 ms per sensor. ``--walk-s 120`` plays the walk
+forwards and backwards in turn for two minutes: long enough for 6D headings to drift, which
+the ``6d auto (joint headings)`` column (``mocapkit.body.joint_headings``) takes out.
+The pelvis follows the walk's own bounce and sway (pelvis_tx/ty/tz about the mean speed).
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ import numpy as np
 
 from benchmarks._docs import write_section
 from mocapkit.body.calibration import HeadingFixed, pose_coordinates
+from mocapkit.body.joint_headings import align_headings_by_joints
 from mocapkit.body.pipeline import run_body
 from mocapkit.body.sensor_tree import SensorTree
 from mocapkit.body.simulate import segment_poses, virtual_suit
@@ -46,10 +50,15 @@ RATE = 100.0
 STILL_S, BLEND_S = 3.0, 1.0
 MAX_MOUNT_DEG = 30.0
 HEADING = 0.6  # where the subject faces [rad from world x]
+ROOT_PATH = ("pelvis_tx", "pelvis_ty", "pelvis_tz")  # the walk's pelvis translation
 
 
-def truth_motion(tree: SensorTree) -> tuple[np.ndarray, dict[str, np.ndarray], float]:
-    """Time (N,), {coordinate: (N,) rad} of the tree, and the walk's start time."""
+def truth_motion(
+    tree: SensorTree, walk_s: float = 0.0
+) -> tuple[np.ndarray, dict[str, np.ndarray], float]:
+    """Time (N,), {coordinate: (N,) rad} of the tree, and the walk's start time.
+    ``walk_s``: the walk played forwards and backwards in turn (continuous) until it lasts
+    this long (0: once)."""
     import mocapkit
 
     with warnings.catch_warnings():
@@ -58,11 +67,18 @@ def truth_motion(tree: SensorTree) -> tuple[np.ndarray, dict[str, np.ndarray], f
     a = rec.angles
     t_walk = np.arange(a.time[0], a.time[-1], 1.0 / RATE)
     walk = {}
-    for name in tree.coordinate_names:
+    for name in (*tree.coordinate_names, *ROOT_PATH):
         if name in a.names and name != "pelvis_rotation":
             v = a.column(name)
             good = np.isfinite(v)
             walk[name] = np.interp(t_walk, a.time[good], v[good])
+    if "pelvis_tx" in walk:  # about the mean speed forward (segment_poses adds that)
+        walk["pelvis_tx"] -= np.polyval(np.polyfit(t_walk, walk["pelvis_tx"], 1), t_walk)
+    if walk_s > 0.0:
+        reps = int(np.ceil(walk_s * RATE / t_walk.size))
+        walk = {k: np.concatenate([v if i % 2 == 0 else v[::-1] for i in range(reps)])
+                for k, v in walk.items()}  # fmt: skip
+        t_walk = t_walk[0] + np.arange(reps * t_walk.size) / RATE
     npose = pose_coordinates(tree, "npose")
     n_still, n_blend = round(STILL_S * RATE), round(BLEND_S * RATE)
     s = 0.5 - 0.5 * np.cos(np.linspace(0.0, np.pi, n_blend))
@@ -71,6 +87,9 @@ def truth_motion(tree: SensorTree) -> tuple[np.ndarray, dict[str, np.ndarray], f
         start = npose.get(name, 0.0)
         w = walk.get(name, np.zeros_like(t_walk))
         coords[name] = np.concatenate([np.full(n_still, start), start + s * (w[0] - start), w])
+    for name in ROOT_PATH:  # the pelvis's bounce and sway about its mean speed forward
+        w = walk.get(name, np.zeros_like(t_walk))
+        coords[name] = np.concatenate([np.zeros(n_still + n_blend), w - w[0]])
     n = n_still + n_blend + t_walk.size
     return np.arange(n) / RATE, coords, (n_still + n_blend) / RATE
 
@@ -100,7 +119,10 @@ def drop_packets(rec: ImuRecording, rng: np.random.Generator, t_walk: float) -> 
 def run(seed: int, tree: SensorTree, time: np.ndarray, coords: dict[str, np.ndarray],
         t_walk: float, faults: bool = False) -> dict[str, dict[str, float]]:  # fmt: skip
     rng = np.random.default_rng(seed)
-    segs = segment_poses(tree, time, coords, heading_rad=HEADING, speed=1.2, walk_start_s=STILL_S)
+    root = np.column_stack([coords[n] for n in ROOT_PATH])
+    angles = {k: v for k, v in coords.items() if k not in ROOT_PATH}
+    segs = segment_poses(tree, time, angles, heading_rad=HEADING, speed=1.2,
+                         walk_start_s=STILL_S, root_path=root)  # fmt: skip
     dist = field_faults(tree, t_walk, float(time[-1])) if faults else None
     recs, mounts = virtual_suit(tree, segs, rng, max_mount_deg=MAX_MOUNT_DEG, disturbances=dist)
     if faults:
@@ -113,16 +135,21 @@ def run(seed: int, tree: SensorTree, time: np.ndarray, coords: dict[str, np.ndar
             for name, rec in recs.items()
         }
         runs = ["npose", "auto"] + (["auto (pose headings)"] if mode == "9d" else [])
+        runs += ["auto (joint headings)"] if mode == "6d" else []
         for calibration in runs:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 # 6D: each sensor's world has its own heading; the automatic calibration
-                # aligns them from the pose ("pose"), as docs/body.md says to
+                # aligns them from the pose ("pose"), as docs/body.md says to; with joint
+                # headings, the joints keep them aligned afterwards (body.joint_headings)
                 align = "pose" if (mode == "6d" and calibration == "auto") else "shared"
-                if calibration == "auto (pose headings)":
+                use = oris
+                if calibration in ("auto (pose headings)", "auto (joint headings)"):
                     align = "pose"
+                if calibration == "auto (joint headings)":
+                    use, _ = align_headings_by_joints(tree, oris, recs)
                 res = run_body(
-                    tree, oris, calibration=calibration.split(" ")[0],
+                    tree, use, calibration=calibration.split(" ")[0],
                     window=(0.5, STILL_S - 0.5),
                     heading=HeadingFixed(HEADING) if calibration == "npose" else None,
                     heading_alignment=align,
@@ -155,12 +182,17 @@ def main() -> None:
         "--faults", action="store_true",
         help="a steel floor under the feet (magnetic disturbance) and lost packets",
     )  # fmt: skip
+    parser.add_argument(
+        "--walk-s", type=float, default=0.0,
+        help="play the walk forwards and backwards in turn this long [s] (0: once, ~2.5 s): "
+        "long enough for the 6D headings to drift",
+    )  # fmt: skip
     parser.add_argument("--write-docs", action="store_true")
     args = parser.parse_args()
     if not TRIAL.exists():
         raise SystemExit(f"needs {TRIAL}")
     tree = SensorTree.preset(args.tree)
-    time, coords, t_walk = truth_motion(tree)
+    time, coords, t_walk = truth_motion(tree, args.walk_s)
     per_seed = [run(seed, tree, time, coords, t_walk, args.faults) for seed in range(args.seeds)]
     keys = list(per_seed[0])
     names = list(per_seed[0][keys[0]])
@@ -184,9 +216,11 @@ def main() -> None:
         lines.append(f"| {n[6:]} | " + " | ".join(f"{mean[k][n]:.2f}" for k in keys) + " |")
     text = (
         f"`python -m benchmarks.body_closed_loop --seeds {args.seeds} --tree {args.tree}"
-        f"{' --faults' if args.faults else ''}` (method and limits in "
+        f"{' --faults' if args.faults else ''}"
+        f"{f' --walk-s {args.walk_s:g}' if args.walk_s else ''}` (method and limits in "
         f"the module docstring: gait2392 walk reconstructed from its markers, {args.tree} "
-        f"tree{', a steel floor under the feet and lost packets' if args.faults else ''}, "
+        f"tree{', a steel floor under the feet and lost packets' if args.faults else ''}"
+        f"{f', the walk played for {args.walk_s:g} s' if args.walk_s else ''}, "
         "virtual IMUs up to 30 deg off, consumer-grade errors, polaris-body, "
         "calibration from the held N-pose with the heading given or automatic). "
         "Joint-angle RMSE against the truth over the walk [deg], mean over seeds; target "
@@ -194,14 +228,19 @@ def main() -> None:
         "heading is its own, so a pose calibration folds that heading into the mounting: "
         "the 6D mounting errors measure that, not a wrong placement; the automatic "
         "calibration in 6D aligns the headings from the pose (heading_alignment=pose; an "
-        "earlier version of this table used 'shared' there, which is wrong for 6D).\n\n"
+        "earlier version of this table used 'shared' there, which is wrong for 6D); "
+        "'joint headings' keeps them aligned afterwards through the joints "
+        "(body.joint_headings: the joint centres' accelerations). The pelvis bounces and "
+        "sways as in the reconstructed walk (earlier tables: a pelvis gliding at constant "
+        "speed, which leaves the hips' joint centres no acceleration to show).\n\n"
         + "\n".join(lines)
     )
     print(text)
     if args.write_docs:
         heading = "Body: closed loop from marker-side truth (inertial chain)"
-        if args.tree != "lower_body" or args.faults:
+        if args.tree != "lower_body" or args.faults or args.walk_s:
             heading += f", {args.tree}" + (", with faults" if args.faults else "")
+            heading += f", {args.walk_s:g} s of walking" if args.walk_s else ""
         write_section(heading, text)
 
 

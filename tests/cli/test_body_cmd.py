@@ -102,8 +102,8 @@ def test_raw_samples_through_a_6d_filter_report_what_no_human_does(
     """The 15-IMU recording's raw samples through polaris 6D, calibrated as if the
     sensors shared one heading (the wrong option for 6D, given explicitly): joints come
     out no human reaches (a forearm pronated 250 deg), and each such coordinate is named
-    with its sensor. With the default for 6D (headings aligned from the pose) the same
-    recording gives no implausible joint."""
+    with its sensor. With the default for 6D (headings aligned at the pose and kept
+    aligned by the joints) the same recording gives no implausible joint."""
     import warnings
 
     from mocapkit.body.plausibility import ImplausibleAnglesWarning
@@ -113,8 +113,13 @@ def test_raw_samples_through_a_6d_filter_report_what_no_human_does(
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         assert main([*argv, "--start", "40.3", "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["implausible"] == []
+    report = json.loads(capsys.readouterr().out)
+    assert report["implausible"] == []
     assert not [w for w in caught if w.category is ImplausibleAnglesWarning]
+    # the default in 6D: headings kept aligned by the joints, each pair reported
+    pairs = {p["child"]: p for p in report["joint_headings"]["pairs"]}
+    assert len(pairs) == 14
+    assert pairs["lower_leg_right"]["windows_used"] > 20
     argv += ["--heading-alignment", "shared"]
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

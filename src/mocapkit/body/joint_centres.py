@@ -93,11 +93,14 @@ def kinematics(q: FloatArray, acc: FloatArray, rate_hz: float) -> Kinematics:
         peak = np.maximum(peak, np.linalg.norm(acc[:, j], axis=1))
     # impacts (heel strikes while running) shake the soft tissue: no rigid-body sample
     calm = uniform_filter1d((peak > MAX_ACC).astype(float), max(1, round(0.1 * rate_hz))) == 0
-    rows = np.flatnonzero((speed > MIN_RATE) & calm)
+    k_all, a_all = np.stack(ks, 1), np.stack(aw, 1)
+    # a gap (NaN orientation) spreads through the differences: rows with any NaN go
+    finite = np.isfinite(k_all).all(axis=(1, 2, 3)) & np.isfinite(a_all).all(axis=(1, 2))
+    rows = np.flatnonzero((speed > MIN_RATE) & calm & finite)
     rows = rows[(rows > 2) & (rows < n - 3)]
     if rows.size > MAX_ROWS:
         rows = rows[np.linspace(0, rows.size - 1, MAX_ROWS).astype(int)]
-    return Kinematics(np.stack(ks, 1)[rows], np.stack(aw, 1)[rows], q[rows])
+    return Kinematics(k_all[rows], a_all[rows], q[rows])
 
 
 def _solve(ki: FloatArray, kj: FloatArray, rhs: FloatArray) -> tuple[float, FloatArray, FloatArray]:

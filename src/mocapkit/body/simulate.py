@@ -106,10 +106,13 @@ def segment_poses(
     heading_rad: float = 0.0,
     speed: float = 1.2,
     walk_start_s: float = 0.0,
+    root_path: FloatArray | None = None,
 ) -> dict[str, PoseSeries]:
     """World poses (ENU) of every segment: orientations from the coordinates, positions
     down the tree from the offsets, the root moving forward at ``speed`` [m/s] from
-    ``walk_start_s``, the body facing ``heading_rad`` from world x."""
+    ``walk_start_s``, the body facing ``heading_rad`` from world x. ``root_path``: (N, 3)
+    added to the root's position, in the body's ground frame (x forward, y up, z right:
+    OpenSim's pelvis_tx/ty/tz), e.g. a real walk's bounce and sway."""
     q_ground = compose_pose(tree, dict(coords))  # (N, S, 4)
     q_wg = q_world_ground(heading_rad)
     n = time.size
@@ -120,6 +123,8 @@ def segment_poses(
         j = tree.parent_index[i]
         if j < 0:
             p_ground[:, i] = offset + np.outer(forward, [1.0, 0.0, 0.0])
+            if root_path is not None:
+                p_ground[:, i] += root_path
         else:
             p_ground[:, i] = p_ground[:, j] + quat_rotate(q_ground[:, j], offset)
     out = {}

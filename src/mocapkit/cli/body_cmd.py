@@ -12,12 +12,22 @@ import json
 import logging
 import sys
 import time
+import warnings
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from mocapkit.body.recordings import FORMATS, load_orientations
+from mocapkit.body.recordings import (
+    FORMATS,
+    load_orientations,
+    read_raw,
+    recording_format,
+    run_filter,
+)
 from mocapkit.cli.common import EXIT_OK, print_json
 from mocapkit.errors import ConfigError
+
+if TYPE_CHECKING:
+    from mocapkit.body.sensor_tree import SensorTree
 
 log = logging.getLogger("mocapkit.body")
 
@@ -65,7 +75,13 @@ def _cmd_angles(args: argparse.Namespace) -> int:
         tree = tree.with_sensor_names({str(k): str(v) for k, v in mapping.items()})
     if args.map:
         tree = tree.with_sensor_names(_parse_map(args.map))
-    orientations = load_orientations(Path(args.recording), args.format, args.filter, args.mode)
+    raw = None
+    if args.filter:  # raw samples through our filter; the accelerometers serve the joints
+        fmt = recording_format(Path(args.recording), args.format)
+        raw = read_raw(Path(args.recording), fmt)
+        orientations = run_filter(raw, args.filter, args.mode)
+    else:
+        orientations = load_orientations(Path(args.recording), args.format)
     placement = load_orientations(Path(args.placement), args.format) if args.placement else None
     heading: HeadingFixed | HeadingFromSensor | None = None
     if args.heading_sensor:
@@ -76,12 +92,16 @@ def _cmd_angles(args: argparse.Namespace) -> int:
         heading = HeadingFixed(math.radians(args.heading_deg))
     calibration: Any = args.calibration
     kwargs: dict[str, Any] = {}
+    joint_info = None
     if args.calibration_in:
         calibration = BodyCalibration.from_dict(json.loads(Path(args.calibration_in).read_text()))
     else:
         alignment = args.heading_alignment
         if alignment is None:  # 6D filters give each sensor its own heading
-            alignment = "pose" if (args.filter and args.mode == "6d") else "shared"
+            alignment = "joints" if (args.filter and args.mode == "6d") else "shared"
+        if alignment == "joints":
+            orientations, joint_info = _joint_headings(tree, orientations, raw)
+            alignment = "pose"  # aligned at the held pose, kept aligned by the joints
         kwargs = {
             "heading": heading,
             "heading_alignment": alignment,
@@ -124,6 +144,22 @@ def _cmd_angles(args: argparse.Namespace) -> int:
         outputs["calibration"] = args.calibration_out
     report = summary(result)
     report.update({"tree": tree.name, "outputs": outputs, "seconds": elapsed})
+    if joint_info is not None:
+        import numpy as np
+
+        report["joint_headings"] = {
+            "pairs": [
+                {
+                    "parent": pr.parent,
+                    "child": pr.child,
+                    "windows_used": pr.windows,
+                    "windows": pr.windows_total,
+                    "drift_corrected_deg": round(float(np.degrees(np.ptp(pr.delta))), 2),
+                }
+                for pr in joint_info.pairs
+            ],
+            "notes": joint_info.notes,
+        }
     if args.json:
         print_json(report)
     else:
@@ -219,11 +255,12 @@ def register(subparsers: Any) -> None:
     )
     a.add_argument(
         "--heading-alignment",
-        choices=("shared", "pose"),
+        choices=("shared", "pose", "joints"),
         default=None,
-        help="how the sensors' headings are aligned at calibration: shared (one world "
-        "heading: 9D, device orientations) or pose (each sensor's own, aligned from the "
-        "held pose); default pose with --filter ... --mode 6d, else shared",
+        help="how the sensors' headings are aligned: shared (one world heading: 9D, device "
+        "orientations), pose (each sensor's own, aligned at the held pose) or joints (aligned "
+        "at the pose and kept aligned by the joints' accelerations: 6D drift taken out; "
+        "needs --filter); default joints with --filter ... --mode 6d, else shared",
     )
     a.add_argument(
         "--root-reference",
@@ -258,3 +295,20 @@ def register(subparsers: Any) -> None:
     from mocapkit.cli.body_identify_cmd import register as register_identify
 
     register_identify(sub)
+
+
+def _joint_headings(
+    tree: SensorTree, orientations: dict[str, Any], raw: dict[str, Any] | None
+) -> tuple[dict[str, Any], Any]:
+    """6D headings kept consistent through the joints (body.joint_headings)."""
+    from mocapkit.body.joint_headings import align_headings_by_joints
+
+    if raw is None:
+        raise ConfigError(
+            "--heading-alignment joints needs the raw samples (their accelerometers): give "
+            "--filter NAME --mode 6d on a raw recording, or use --heading-alignment pose"
+        )
+    turned, info = align_headings_by_joints(tree, orientations, raw)
+    for note in info.notes:
+        warnings.warn(f"joint headings: {note}", stacklevel=2)
+    return turned, info
