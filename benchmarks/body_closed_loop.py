@@ -116,9 +116,28 @@ def drop_packets(rec: ImuRecording, rng: np.random.Generator, t_walk: float) -> 
     return ImuRecording(rec.time[keep], rec.gyr[keep], rec.acc[keep], mag, name=rec.name)
 
 
+def sloppy_pose(
+    tree: SensorTree, time: np.ndarray, coords: dict[str, np.ndarray], sd_deg: float,
+    rng: np.random.Generator,
+) -> dict[str, np.ndarray]:  # fmt: skip
+    """The held pose as people hold it: every joint coordinate off the nominal pose by a
+    random amount (sd ``sd_deg``) while still, fading out over the blend into the walk."""
+    n_still, n_blend = round(STILL_S * RATE), round(BLEND_S * RATE)
+    fade = np.concatenate([np.ones(n_still), 0.5 + 0.5 * np.cos(np.linspace(0, np.pi, n_blend)),
+                           np.zeros(time.size - n_still - n_blend)])  # fmt: skip
+    out = dict(coords)
+    for name in tree.coordinate_names:
+        if name in out and not name.startswith("pelvis"):
+            out[name] = out[name] + np.radians(rng.normal(0.0, sd_deg)) * fade
+    return out
+
+
 def run(seed: int, tree: SensorTree, time: np.ndarray, coords: dict[str, np.ndarray],
-        t_walk: float, faults: bool = False) -> dict[str, dict[str, float]]:  # fmt: skip
+        t_walk: float, faults: bool = False, pose_sd_deg: float = 0.0,
+        ) -> dict[str, dict[str, float]]:  # fmt: skip
     rng = np.random.default_rng(seed)
+    if pose_sd_deg > 0.0:
+        coords = sloppy_pose(tree, time, coords, pose_sd_deg, np.random.default_rng(1000 + seed))
     root = np.column_stack([coords[n] for n in ROOT_PATH])
     angles = {k: v for k, v in coords.items() if k not in ROOT_PATH}
     segs = segment_poses(tree, time, angles, heading_rad=HEADING, speed=1.2,
@@ -187,13 +206,19 @@ def main() -> None:
         help="play the walk forwards and backwards in turn this long [s] (0: once, ~2.5 s): "
         "long enough for the 6D headings to drift",
     )  # fmt: skip
+    parser.add_argument(
+        "--pose-sd-deg", type=float, default=0.0,
+        help="the held pose off the nominal one by this much per joint coordinate (sd, "
+        "deg): people do not hold an N-pose exactly (0: held exactly)",
+    )  # fmt: skip
     parser.add_argument("--write-docs", action="store_true")
     args = parser.parse_args()
     if not TRIAL.exists():
         raise SystemExit(f"needs {TRIAL}")
     tree = SensorTree.preset(args.tree)
     time, coords, t_walk = truth_motion(tree, args.walk_s)
-    per_seed = [run(seed, tree, time, coords, t_walk, args.faults) for seed in range(args.seeds)]
+    per_seed = [run(seed, tree, time, coords, t_walk, args.faults, args.pose_sd_deg)
+                for seed in range(args.seeds)]  # fmt: skip
     keys = list(per_seed[0])
     names = list(per_seed[0][keys[0]])
     mean = {k: {n: float(np.mean([s[k][n] for s in per_seed])) for n in names} for k in keys}
@@ -217,10 +242,13 @@ def main() -> None:
     text = (
         f"`python -m benchmarks.body_closed_loop --seeds {args.seeds} --tree {args.tree}"
         f"{' --faults' if args.faults else ''}"
-        f"{f' --walk-s {args.walk_s:g}' if args.walk_s else ''}` (method and limits in "
+        f"{f' --walk-s {args.walk_s:g}' if args.walk_s else ''}"
+        f"{f' --pose-sd-deg {args.pose_sd_deg:g}' if args.pose_sd_deg else ''}"
+        "` (method and limits in "
         f"the module docstring: gait2392 walk reconstructed from its markers, {args.tree} "
         f"tree{', a steel floor under the feet and lost packets' if args.faults else ''}"
-        f"{f', the walk played for {args.walk_s:g} s' if args.walk_s else ''}, "
+        f"{f', the walk played for {args.walk_s:g} s' if args.walk_s else ''}"
+        f"{f', the pose held {args.pose_sd_deg:g} deg (sd) off' if args.pose_sd_deg else ''}, "
         "virtual IMUs up to 30 deg off, consumer-grade errors, polaris-body, "
         "calibration from the held N-pose with the heading given or automatic). "
         "Joint-angle RMSE against the truth over the walk [deg], mean over seeds; target "
@@ -238,9 +266,11 @@ def main() -> None:
     print(text)
     if args.write_docs:
         heading = "Body: closed loop from marker-side truth (inertial chain)"
-        if args.tree != "lower_body" or args.faults or args.walk_s:
+        if args.tree != "lower_body" or args.faults or args.walk_s or args.pose_sd_deg:
             heading += f", {args.tree}" + (", with faults" if args.faults else "")
             heading += f", {args.walk_s:g} s of walking" if args.walk_s else ""
+        if args.pose_sd_deg:
+            heading += f", the pose held {args.pose_sd_deg:g} deg off"
         write_section(heading, text)
 
 
