@@ -27,7 +27,12 @@ def _pipeline_args(p: argparse.ArgumentParser) -> None:
     from mocapkit.imu.filters import available_filters
 
     p.add_argument("--preset", default="right_arm_2", help="body sensor tree")
-    p.add_argument("--robot", default="robonaut2-right", help="robot arm (intermediate model)")
+    p.add_argument(
+        "--robot",
+        default="robonaut2-right",
+        help="robot arm (intermediate model, end-effector commands), or a humanoid name or "
+        "robot YAML (mocapkit robot list: whole-body joint commands)",
+    )
     p.add_argument(
         "--retarget",
         default="segments",

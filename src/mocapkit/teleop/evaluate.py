@@ -44,6 +44,7 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.body.calibration import HeadingFixed, calibrate_pose
 from mocapkit.body.sensor_tree import SensorTree
+from mocapkit.errors import ConfigError
 from mocapkit.series import OrientationSeries
 from mocapkit.teleop.eval_trace import RunTrace, run_trace
 from mocapkit.teleop.live import LiveConfig, LiveSession
@@ -106,6 +107,8 @@ def truth_model(
     )
     pipe.set_calibration(calib)
     n = len(motion.time)
+    if pipe.arm is None:
+        raise ConfigError(f"evaluate: robot {cfg.robot!r} is a humanoid; evaluation drives arms")
     q = np.empty((n, pipe.arm.n))
     T = np.empty((n, 4, 4))
     angles = np.empty((n, len(tree.coordinate_names)))

@@ -1,4 +1,4 @@
-"""Client side of the robot link: send end-effector commands, collect pose reports."""
+"""Client side of the robot link: send end-effector or joint commands, collect reports."""
 
 from __future__ import annotations
 
@@ -78,6 +78,12 @@ class RobotLink:
         T = np.asarray(T_base_ee, dtype=np.float64)
         _kernels.mat_to_quat(T, self._quat)
         self._send(proto.encode_command(self.seq, time.monotonic_ns(), T[:3, 3], self._quat))
+        return self.seq
+
+    def send_joints(self, base_pos: Any, base_quat: Any, q: Any) -> int:
+        """Send a humanoid's base pose and joint positions [rad]; returns the sequence."""
+        self.seq += 1
+        self._send(proto.encode_joints(self.seq, time.monotonic_ns(), base_pos, base_quat, q))
         return self.seq
 
     def send_hold(self) -> None:

@@ -32,12 +32,14 @@ import numpy as np
 from mocapkit.body.calibration import BodyCalibration, CalibrationError
 from mocapkit.body.segment_points import segment_points
 from mocapkit.errors import ConfigError, MocapkitError
+from mocapkit.robot.registry import available_robots
 from mocapkit.suit.receiver import Receiver
 from mocapkit.suit.receiver_state import ReceiverConfig
 from mocapkit.suit.samples import SuitSample
 from mocapkit.suit.transport import UdpTransport
 from mocapkit.teleop import _kernels
 from mocapkit.teleop import protocol as proto
+from mocapkit.teleop.humanoid_session import HumanoidSession
 from mocapkit.teleop.link import RobotLink
 from mocapkit.teleop.pipeline import Frame, PipelineConfig, TeleopPipeline
 from mocapkit.teleop.recording import TeleopRecorder
@@ -125,7 +127,10 @@ class LiveSession:
         keep_frames: bool = False,
     ) -> None:
         self.config = config
-        self.session = TeleopSession(config.session)
+        humanoid = config.pipeline.robot not in available_robots()
+        self.session = (
+            HumanoidSession(config.session) if humanoid else TeleopSession(config.session)
+        )
         self.link = RobotLink(robot_address, on_report=self._on_report, key=config.robot_key)
         self.pipeline = TeleopPipeline(config.pipeline, self.session, self.link)
         self.pipeline.keep_frames = keep_frames
@@ -333,9 +338,9 @@ class LiveSession:
         if rec is not None and frame.command is not None:
             pos, quat = _pose_lists(frame.command)
             rec.command(frame.t, pos, quat)
-            if frame.angles is not None and frame.q_robot is not None:
-                names = [*self.pipeline.tree.coordinate_names, *self.pipeline.arm.joint_names]
-                rec.joints(frame.t, names, np.concatenate([frame.angles, frame.q_robot]))
+        if rec is not None and frame.angles is not None and frame.q_robot is not None:
+            names = [*self.pipeline.tree.coordinate_names, *self.pipeline.robot_joint_names]
+            rec.joints(frame.t, names, np.concatenate([frame.angles, frame.q_robot]))
         self._record_transitions()
 
     def _record_transitions(self) -> None:
@@ -387,7 +392,9 @@ class LiveSession:
             },
             "robot_joints_deg": None
             if q_robot is None
-            else {n: float(np.degrees(v)) for n, v in zip(p.arm.joint_names, q_robot, strict=True)},
+            else {
+                n: float(np.degrees(v)) for n, v in zip(p.robot_joint_names, q_robot, strict=True)
+            },
             "ee_commanded": _pose_dict(self._last_command),
             "ee_actual": _pose_dict(self.link.robot_pose()),
             "robot_name": self.config.pipeline.robot,

@@ -22,6 +22,13 @@ caller's thread (the receiver's, see :class:`mocapkit.teleop.live.LiveSession`):
    gate, workspace and speed limits, the link watchdog;
 7. the command (or a HOLD) leaves on the robot link.
 
+A humanoid robot (``robot`` a packaged humanoid or a robot YAML, ``mocapkit robot list``)
+replaces steps 4-7: the body's joint angles go through
+:class:`~mocapkit.retarget.live.LiveRetargeter` (the offline retargeting's targets and QP,
+one step per frame, self-collisions guarded) and
+:class:`~mocapkit.teleop.humanoid_session.HumanoidSession` turns the target into a JOINTS
+command (base pose and joint positions) on the same link, with the same watchdogs.
+
 ``pipeline_ms`` is the host-side time from the oldest contributing sample's arrival (the
 receiver's ``t_arrival_ns``, taken when the datagram was read) to the command's send.
 
@@ -38,7 +45,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -55,14 +62,21 @@ from mocapkit.errors import ConfigError, MocapkitError
 from mocapkit.geometry import quat_to_matrix
 from mocapkit.imu.filter_bank import FilterBank
 from mocapkit.imu.filters import make_filter
-from mocapkit.robot.registry import robot_arm
+from mocapkit.robot.model import ArmModel
+from mocapkit.robot.registry import available_robots, robot_arm
 from mocapkit.series import OrientationSeries
 from mocapkit.suit.protocol import Kind
 from mocapkit.teleop import _kernels
 from mocapkit.teleop.heading import HingeHeading
+from mocapkit.teleop.humanoid_session import HumanoidSession, JointsTarget
 from mocapkit.teleop.link import RobotLink
 from mocapkit.teleop.retarget_setup import CHEST_IN_SEGMENT, setup_retarget
 from mocapkit.teleop.session import State, TeleopSession, TickOutput
+
+if TYPE_CHECKING:
+    from mocapkit.retarget.live import LiveRetargeter
+
+NEUTRAL_ROOT = ("pelvis_tilt", "pelvis_list", "pelvis_rotation")
 
 #: [s] a sensor clock that steps back further than this was reset (a reboot); shorter
 #: steps back are late or repeated samples, ignored as not fresh.
@@ -82,7 +96,8 @@ class PipelineConfig:
         preset: body sensor tree (``right_arm_2``: the paper; ``right_arm_torso_3``).
         sensor_ids: ``(sensor name, suit ID)`` pairs; default: the tree's sensors in order,
             IDs 1, 2, ... (the paper: 1 upper arm, 2 forearm).
-        robot: robot arm (``mocapkit.robot.available_robots()``), also the intermediate model.
+        robot: robot arm (``mocapkit.robot.available_robots()``), also the intermediate model;
+            or a humanoid (``mocapkit robot list``, or a robot YAML): joint commands.
         retarget: ``"segments"`` (eq. 16 along the robot's axes; Robonaut 2) or ``"map"``
             (the robot's packaged YAML joint map on the human joint angles).
         fusion: ``"node"`` (orientations fused on the nodes) or ``"host"`` (RAW samples
@@ -219,12 +234,31 @@ class TeleopPipeline:
             if c.fusion == "host"
             else None
         )
-        self.arm = robot_arm(c.robot)
-        rs = setup_retarget(tree, self.arm, c.robot, c.retarget, c.pose)
-        self.retargeter = rs.retargeter
-        self.compiled_map = rs.compiled_map
-        self._rt_segments, self._rt_index = rs.segments, rs.index
-        self._chest_index, self._map_extra = rs.chest_index, rs.map_extra
+        self.humanoid: LiveRetargeter | None = None
+        self.arm: ArmModel | None = None
+        if c.robot in available_robots():
+            self.arm = robot_arm(c.robot)
+            rs = setup_retarget(tree, self.arm, c.robot, c.retarget, c.pose)
+            self.retargeter = rs.retargeter
+            self.compiled_map = rs.compiled_map
+            self._rt_segments, self._rt_index = rs.segments, rs.index
+            self._chest_index, self._map_extra = rs.chest_index, rs.map_extra
+        else:  # a humanoid (packaged name or YAML): whole-body joints, one QP per frame
+            if not isinstance(session, HumanoidSession):
+                raise ConfigError(
+                    f"robot {c.robot!r} is a humanoid (joint commands): its session must be "
+                    "a HumanoidSession (LiveSession picks it by the robot's name)"
+                )
+            from mocapkit.retarget.live import LiveRetargeter
+
+            self.humanoid = LiveRetargeter(c.robot, rate_hz=c.rate_hz)
+            r = self.humanoid.robot
+            session.v_max = r.v_max[r.iv]
+            self.retargeter = None
+            self.compiled_map = None
+            self._rt_segments, self._rt_index = (), np.zeros(0, dtype=np.int64)
+            self._chest_index, self._map_extra = 0, []
+        self._target: JointsTarget | None = None
         self.body: BodyStream | None = None
         self.calibration: BodyCalibration | None = None
         self._calib: _Calibration | None = None
@@ -472,6 +506,9 @@ class TeleopPipeline:
             correction = self._hinge.update(body.q_world_segment)
             if correction is not None:
                 self._refine_heading(correction, now)
+        if self.humanoid is not None:
+            return None, self._humanoid_target(angles, now)
+        assert self.arm is not None
         if self.retargeter is not None:
             R_seg = self._R_seg
             ok = _kernels.segments_in_chest(
@@ -497,8 +534,68 @@ class TeleopPipeline:
         self.T_model = T
         return T, None
 
+    @property
+    def robot_joint_names(self) -> tuple[str, ...]:
+        """The robot's joints as ``q_robot`` lists them."""
+        if self.humanoid is not None:
+            r = self.humanoid.robot
+            names = r.model.names
+            by_q = {int(r.model.joints[j].idx_q): names[j] for j in range(1, r.model.njoints)}
+            return tuple(by_q[int(i)] for i in r.iq)
+        assert self.arm is not None
+        return tuple(self.arm.joint_names)
+
+    def _humanoid_target(self, angles: FloatArray, now: float) -> str | None:
+        """The humanoid's joints for the body's joint angles (``self._target``), or the
+        reason there are none."""
+        assert self.humanoid is not None
+        assert self.body is not None
+        if not np.isfinite(angles).all():
+            self._target = None
+            return f"body model: {', '.join(self.body.invalid_coordinates())} unknown"
+        # the suit's tree may be part of a body (an arm): the rest stands in the neutral pose
+        coords = dict.fromkeys(NEUTRAL_ROOT, 0.0)
+        coords.update(zip(self.tree.coordinate_names, angles.tolist(), strict=True))
+        try:
+            q = self.humanoid.update(coords, now)
+        except MocapkitError as exc:  # a fault to hold on, never a dead receiver thread
+            self._target = None
+            return f"retargeting: {exc}"
+        if not np.isfinite(q).all():
+            self._target = None
+            return "retargeting: a joint came out non-finite"
+        r = self.humanoid.robot
+        joints = q[r.iq]
+        self.q_robot = joints
+        if r.spec.floating_base:
+            pos, quat = q[:3].copy(), np.array([q[6], q[3], q[4], q[5]])
+        else:
+            pos, quat = np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
+        self._target = JointsTarget(pos, quat, joints.copy())
+        return None
+
+    def _tick_humanoid(self, now: float, model: bool) -> TickOutput:
+        link = self.link
+        robot_q = gate = reason = None
+        age = math.inf
+        if link is not None and link.latest is not None:
+            robot_q, gate, reason = link.latest.q, link.latest.gate, link.latest.reason
+            age = link.report_age(now)
+        if model:
+            _, fault = self.model_pose(now)
+        elif self.body is None:
+            fault = "calibrating" if self._calib is not None else "not calibrated"
+        else:
+            fault = self.sensor_fault(now)
+        self.last_fault = fault
+        target = self._target if fault is None else None
+        assert isinstance(self.session, HumanoidSession)
+        return self.session.tick_joints(now, target, robot_q, age, fault, gate, reason)
+
     def _tick(self, now: float, model: bool) -> TickOutput:
         """Run the session with the model pose (``model``) or without (a watchdog tick)."""
+        if self.humanoid is not None:
+            return self._tick_humanoid(now, model)
         link = self.link
         robot_pose = gate = reason = None
         age = math.inf
@@ -538,22 +635,25 @@ class TeleopPipeline:
                 if self.body is not None and self.sensor_fault(now) is None:
                     return None
             out = self._tick(now, model=False)
-            out.command = None  # nothing new: never resend
+            out.command = out.joints = None  # nothing new: never resend
         else:
             out = self._tick(now, model=True)
         latency = None
+        sent = out.command is not None or out.joints is not None
         if self.link is not None:
             if out.command is not None:
                 self.link.send_command(out.command)
+            elif out.joints is not None:
+                self.link.send_joints(*out.joints)
             elif out.hold:
                 self.link.send_hold()
-        if oldest is not None and out.command is not None:
+        if oldest is not None and sent:
             latency = time.perf_counter_ns() - oldest
             self.latencies_ns[self.n_latencies % _LATENCY_CAPACITY] = latency
             self.n_latencies += 1
         if oldest is not None and self.clipped:
             out.notes.append(f"joint limit: {', '.join(self.clipped)} clipped")
-        if oldest is None and out.command is None and not out.hold and not out.notes:
+        if oldest is None and not sent and not out.hold and not out.notes:
             return None
         frame = Frame(
             now,

@@ -1,13 +1,17 @@
-"""Robot-link protocol v1: end-effector commands and pose reports over UDP.
+"""Robot-link protocol v1: end-effector or joint commands and reports over UDP.
 
 Little-endian, one message per datagram (see docs/design/teleop.md, "Robot link")::
 
-    0-3   magic b"MKRL"          4  version (1)         5  kind (1 COMMAND, 2 HOLD, 3 REPORT)
+    0-3   magic b"MKRL"          4  version (1)         5  kind (1 COMMAND, 2 HOLD, 3 REPORT,
+                                                                  4 JOINTS)
     6-7   flags u16              8-11 seq u32           12-19 t_send_ns u64 (CLOCK_MONOTONIC)
     COMMAND: 20-43 position xyz f64 [m], 44-75 quaternion wxyz f64 (chest frame)
     HOLD:    header only
     REPORT:  20-75 actual pose, 76-79 last accepted command seq u32, 80 gate u8,
              81 reason u8, 82 n u8, then n f64 joint angles [rad]
+    JOINTS:  20-75 base pose (position, quaternion wxyz; a humanoid's floating base),
+             76 n u8, then n f64 joint positions [rad] (the robot's one-DOF joints in
+             model order); a humanoid's REPORT carries its base pose and its joints
 
 Decoding raises :class:`LinkProtocolError` (a ``DataError``) with the reason; the server
 counts and drops such datagrams.
@@ -37,7 +41,8 @@ VERSION = 1
 _HEADER = struct.Struct("<4sBBHIQ")  # 20 bytes
 _POSE = struct.Struct("<7d")  # 56 bytes
 _REPORT_TAIL = struct.Struct("<IBBB")  # 7 bytes
-MAX_JOINTS = 32
+MAX_JOINTS = 64
+_COUNT = struct.Struct("<B")
 FLAG_SIGNED = 0x1
 MAC_LEN = 16
 
@@ -46,6 +51,7 @@ class Kind(IntEnum):
     COMMAND = 1
     HOLD = 2
     REPORT = 3
+    JOINTS = 4
 
 
 class Gate(IntEnum):
@@ -82,6 +88,15 @@ class Command:
 
 
 @dataclass(frozen=True)
+class JointsCommand:
+    seq: int
+    t_send_ns: int
+    base_pos: FloatArray  # (3,) [m]
+    base_quat: FloatArray  # (4,) [w, x, y, z]
+    q: FloatArray  # (n,) [rad]
+
+
+@dataclass(frozen=True)
 class Hold:
     seq: int
     t_send_ns: int
@@ -99,7 +114,7 @@ class Report:
     q: FloatArray  # (n,) [rad]
 
 
-Message = Command | Hold | Report
+Message = Command | Hold | Report | JointsCommand
 
 
 def _header(kind: Kind, seq: int, t_ns: int) -> bytes:
@@ -108,6 +123,20 @@ def _header(kind: Kind, seq: int, t_ns: int) -> bytes:
 
 def encode_command(seq: int, t_ns: int, pos: FloatArray, quat: FloatArray) -> bytes:
     return _header(Kind.COMMAND, seq, t_ns) + _POSE.pack(*pos, *quat)
+
+
+def encode_joints(
+    seq: int, t_ns: int, base_pos: FloatArray, base_quat: FloatArray, q: FloatArray
+) -> bytes:
+    n = len(q)
+    if n > MAX_JOINTS:
+        raise LinkProtocolError(f"JOINTS: {n} joints, at most {MAX_JOINTS}")
+    return (
+        _header(Kind.JOINTS, seq, t_ns)
+        + _POSE.pack(*base_pos, *base_quat)
+        + _COUNT.pack(n)
+        + struct.pack(f"<{n}d", *q)
+    )
 
 
 def encode_hold(seq: int, t_ns: int) -> bytes:
@@ -170,12 +199,21 @@ def decode(data: bytes) -> Message:
     body = data[_HEADER.size :]
     if kind == Kind.HOLD:
         return Hold(seq, t_ns)
-    if kind not in (Kind.COMMAND, Kind.REPORT):
+    if kind not in (Kind.COMMAND, Kind.REPORT, Kind.JOINTS):
         raise LinkProtocolError(f"unknown message kind {kind}")
     if len(body) < _POSE.size:
         raise LinkProtocolError(f"{Kind(kind).name} body of {len(body)} bytes, expected >= 56")
     vals = np.array(_POSE.unpack_from(body))
     pos, quat = vals[:3], vals[3:]
+    if kind == Kind.JOINTS:
+        tail = body[_POSE.size :]
+        if len(tail) < _COUNT.size:
+            raise LinkProtocolError("JOINTS truncated before its joint count")
+        (n,) = _COUNT.unpack_from(tail)
+        joints = tail[_COUNT.size :]
+        if n > MAX_JOINTS or len(joints) != 8 * n:
+            raise LinkProtocolError(f"JOINTS announces {n} joints but carries {len(joints)} bytes")
+        return JointsCommand(seq, t_ns, pos, quat, np.array(struct.unpack(f"<{n}d", joints)))
     if kind == Kind.COMMAND:
         if len(body) != _POSE.size:
             raise LinkProtocolError(f"COMMAND body of {len(body)} bytes, expected 56")

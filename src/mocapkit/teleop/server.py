@@ -34,6 +34,7 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -42,6 +43,9 @@ from mocapkit.errors import ConfigError, MocapkitError
 from mocapkit.robot.ik import IkParams, ik_step, solve_ik
 from mocapkit.robot.model import ArmModel, pose_distance, pose_matrix, pose_parts
 from mocapkit.teleop import protocol as proto
+
+if TYPE_CHECKING:
+    from mocapkit.teleop.humanoid_sim import HumanoidSim
 
 log = logging.getLogger("mocapkit.teleop.server")
 
@@ -55,7 +59,8 @@ class ServerConfig:
     """Robot-server settings (SI units).
 
     Attributes:
-        robot: registry name of the arm (``mocapkit.robot.available_robots()``).
+        robot: registry name of the arm (``mocapkit.robot.available_robots()``), or a
+            humanoid (``mocapkit robot list``, or a robot YAML): joint commands.
         rate_hz: control loop rate.
         report_hz: pose report rate.
         latency_s: actuation latency added to every accepted command.
@@ -63,6 +68,7 @@ class ServerConfig:
         command_timeout_s: without commands for this long the gate drops and the arm holds.
         velocity_scale: fraction of the arm's joint speed limits used.
         q_start: initial joints [rad]; default the arm's ready posture.
+        gate_joint_rad: a humanoid's synchronisation threshold, per joint.
     """
 
     robot: str = "robonaut2-right"
@@ -74,9 +80,11 @@ class ServerConfig:
     command_timeout_s: float = 0.5
     velocity_scale: float = 1.0
     q_start: tuple[float, ...] | None = None
+    gate_joint_rad: float = float(np.radians(6.0))
 
     def __post_init__(self) -> None:
-        for name in ("rate_hz", "report_hz", "gate_pos_m", "gate_rot_rad", "command_timeout_s"):
+        for name in ("rate_hz", "report_hz", "gate_pos_m", "gate_rot_rad", "command_timeout_s",
+                     "gate_joint_rad"):  # fmt: skip
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ConfigError(f"ServerConfig.{name}: expected a positive number, got {v}")
@@ -157,6 +165,13 @@ class RobotSim:
         s.pending.append((now + c.latency_s, T))
         return True
 
+    def on_joints(self, cmd: proto.JointsCommand, now: float) -> bool:
+        """A joint command: an arm takes end-effector poses (refused, counted)."""
+        self.state.rejected += 1
+        self._set(self.state.gate, proto.Reason.BAD_COMMAND)
+        log.warning("JOINTS command to an arm: send end-effector COMMAND messages")
+        return False
+
     def on_hold(self, now: float) -> None:
         s = self.state
         s.pending.clear()
@@ -203,7 +218,7 @@ class RobotSim:
 
 
 def serve(
-    sim: RobotSim,
+    sim: RobotSim | HumanoidSim,
     sock: socket.socket,
     max_seconds: float | None = None,
     parent_pid: int | None = None,
@@ -269,6 +284,8 @@ def serve(
                 client_seen, last_seq = t, msg.seq
                 if isinstance(msg, proto.Command):
                     sim.on_command(msg, t)
+                elif isinstance(msg, proto.JointsCommand):
+                    sim.on_joints(msg, t)
                 elif isinstance(msg, proto.Hold):
                     sim.on_hold(t)
         now = time.monotonic()
@@ -291,10 +308,26 @@ def serve(
 PAIR_TIMEOUT_S = 1.0
 
 
-def build_sim(config: ServerConfig) -> RobotSim:
-    from mocapkit.robot.registry import robot_arm
+def build_sim(config: ServerConfig) -> RobotSim | HumanoidSim:
+    """An arm of the registry, or a humanoid (a packaged name or a robot YAML)."""
+    from mocapkit.robot.registry import available_robots, robot_arm
 
-    return RobotSim(robot_arm(config.robot), config)
+    if config.robot in available_robots():
+        return RobotSim(robot_arm(config.robot), config)
+    from mocapkit.retarget.robot_model import build_humanoid
+    from mocapkit.retarget.robot_spec import load_robot_spec
+    from mocapkit.teleop.humanoid_sim import HumanoidSim
+
+    sim = HumanoidSim(build_humanoid(load_robot_spec(config.robot)), config)
+    if config.q_start is not None:
+        q0 = np.asarray(config.q_start, dtype=float)
+        if q0.shape != sim.joints.shape:
+            raise ConfigError(
+                f"--q-start-deg: {q0.size} values, robot {config.robot} has "
+                f"{sim.joints.size} joints ({', '.join(sim.joint_names)})"
+            )
+        sim.joints = np.clip(q0, sim.lo, sim.hi)
+    return sim
 
 
 def config_args(parser: argparse.ArgumentParser) -> None:
@@ -304,7 +337,11 @@ def config_args(parser: argparse.ArgumentParser) -> None:
     from mocapkit.cli.boundary import port
 
     parser.add_argument("--port", type=port, default=9870, help="UDP port (0: any free port)")
-    parser.add_argument("--robot", default=d.robot, help="robot arm name")
+    parser.add_argument(
+        "--robot",
+        default=d.robot,
+        help="robot arm name, or a humanoid (mocapkit robot list) or robot YAML: joint commands",
+    )
     parser.add_argument(
         "--rate-hz", type=float, default=d.rate_hz, help="the robot's control rate [Hz]"
     )
@@ -346,6 +383,13 @@ def config_args(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="initial joints, comma-separated degrees (default: the arm's ready posture)",
     )
+    parser.add_argument(
+        "--gate-joint-deg",
+        type=float,
+        default=float(np.degrees(d.gate_joint_rad)),
+        help="humanoids: a joint command farther than this from the actual joint (or, "
+        "synchronised, from the last command) is refused [deg]",
+    )
     parser.add_argument("--max-seconds", type=float, default=None, help="stop after this long")
     parser.add_argument(
         "--key-file",
@@ -366,6 +410,7 @@ def config_from_args(args: argparse.Namespace) -> ServerConfig:
         command_timeout_s=args.command_timeout_s,
         velocity_scale=args.velocity_scale,
         q_start=_q_start(args.q_start_deg),
+        gate_joint_rad=float(np.radians(args.gate_joint_deg)),
     )
 
 

@@ -121,6 +121,7 @@ class TickOutput:
     command: FloatArray | None = None
     hold: bool = False
     notes: list[str] = field(default_factory=list)
+    joints: tuple[FloatArray, FloatArray, FloatArray] | None = None  # humanoid: base, q
 
 
 class TeleopSession:
