@@ -60,6 +60,10 @@ _COMMANDS: dict[str, tuple[str, str]] = {
         "mocapkit.cli.teleop_cmd",
         ("robot teleoperation: six-shape evaluation, live session, robot server, playback"),
     ),
+    "view": (
+        "mocapkit.cli.view_cmd",
+        "recordings and results in the browser (viser), side by side on a timeline",
+    ),
     "viewer": (
         "mocapkit.cli.viewer_cmd",
         ("live web viewer (viser) of a teleoperation session, with its controls"),
