@@ -34,7 +34,8 @@ def test_demo_runs_everything_and_writes_the_report(
     assert report == tmp_path / "report.html"
     html = report.read_text()
     assert html.count("data:image/png;base64,") >= 5  # every plot embedded
-    for title in ("Teleoperation", "Marker reconstruction", "Orientation filters"):
+    for title in ("Teleoperation", "Marker reconstruction", "Orientation filters",
+                  "on a humanoid (Unitree G1)"):  # fmt: skip
         assert title in html
     t = out["teleop"]
     assert t["transitions"][:2] == [
@@ -60,6 +61,12 @@ def test_demo_runs_everything_and_writes_the_report(
     assert {"/body/segments", "/robot/ee_command", "/robot/ee_actual"} <= set(fox)
     assert fox["/body/segments"][0][1] == "foxglove.FrameTransforms"
     assert out["markers"]["status"] in ("ok", "unavailable")
+    r = out["retarget"]
+    if r["status"] == "ok":  # the robots extra present
+        assert r["limit_violations"] == {"position": 0, "velocity": 0}
+        assert r["collision_frames"] == 0
+        assert r["keypoint_rmse_mm"] < 60.0  # measured 22; a wrong frame gives hundreds
+        assert Path(out["outputs"]["retarget_g1_npz"]).is_file()
     rows = {(r["filter"], r["mode"]): r for r in out["imu"]["results"]}
     assert 0.5 < rows[("miller", "9d")]["total_deg"] < 5.0
 
@@ -91,4 +98,4 @@ def test_demo_bad_sections_is_a_usage_error(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     assert main(["demo", "--sections", "imu,video", "--out", str(tmp_path)]) == 1
-    assert "sections: expected some of teleop, markers, imu" in capsys.readouterr().err
+    assert "sections: expected some of teleop, markers, retarget, imu" in capsys.readouterr().err

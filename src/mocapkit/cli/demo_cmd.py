@@ -19,9 +19,11 @@ examples:
 
 Sections: teleop (a simulated suit streams over loopback UDP through the receiver,
 filters, body model, Robonaut-arm retargeting and the robot-server process, in real
-time), markers (a real optical marker trial reconstructed), imu (every orientation
-filter on a real BROAD recording). Outputs in --out: report.html, the body model's
-joint angles (.mot), a Foxglove MCAP of the session, the marker joint angles (.mot).
+time), markers (a real optical marker trial reconstructed), retarget (the same trial
+onto the Unitree G1 humanoid: figures and its trajectory), imu (every orientation filter
+on a real BROAD recording). Outputs in --out: report.html, the body model's joint angles
+(.mot), a Foxglove MCAP of the session, the marker joint angles (.mot), G1's trajectory
+(walk1_g1.npz: mocapkit view walk1_g1.npz).
 """
 
 

@@ -13,7 +13,7 @@ from mocapkit.errors import ConfigError
 from mocapkit.teleop.operator import SHAPES
 from mocapkit.viz.report import HtmlReport
 
-SECTIONS = ("teleop", "markers", "imu")
+SECTIONS = ("teleop", "markers", "retarget", "imu")
 
 
 @dataclass(frozen=True)
@@ -70,8 +70,8 @@ def run_demo(config: DemoConfig | None = None, progress: Progress = no_progress)
         "mocapkit demo",
         "Human motion capture to robot commands, end to end on data bundled with mocapkit: "
         "a simulated inertial suit teleoperating Robonaut 2's arm through the live chain, a "
-        "real optical marker trial reconstructed, and the orientation filters on a real "
-        "IMU recording.",
+        "real optical marker trial reconstructed and retargeted onto the Unitree G1 humanoid, "
+        "and the orientation filters on a real IMU recording.",
     )
     result = DemoResult(report=out / "report.html")
     clock = time.perf_counter
@@ -89,6 +89,19 @@ def run_demo(config: DemoConfig | None = None, progress: Progress = no_progress)
         result.outputs.update(markers.get("outputs", {}))
         report_markers(report, markers)
         result.seconds["markers"] = clock() - t0
+    if "retarget" in c.sections:
+        from mocapkit.demo.retarget_section import (
+            report_retarget,
+            retarget_summary,
+            run_retarget,
+        )
+
+        t0 = clock()
+        rt = run_retarget(out, progress)
+        result.summary["retarget"] = retarget_summary(rt)
+        result.outputs.update(rt.get("outputs", {}))
+        report_retarget(report, rt)
+        result.seconds["retarget"] = clock() - t0
     if "imu" in c.sections:
         t0 = clock()
         result.summary["imu"] = imu = run_imu(progress)
