@@ -15,6 +15,7 @@ examples:
   mocapkit viewer --port 9000 --shapes circle,infinity --seconds 120
   mocapkit viewer --host 0.0.0.0        # reachable from other machines on the network
   mocapkit viewer --seconds 30 --json   # stop after 30 s, print the session's figures
+  mocapkit viewer --robot g1            # the operator drives Unitree G1 (whole body)
 
 The page shows the operator's skeleton, the sensor frames and the Robonaut 2 arm, with
 buttons Calibrate / Engage / Disengage / Reindex and gauges for latency, packet loss and
@@ -42,6 +43,12 @@ def register(sub: Any) -> None:
         help="comma-separated shapes the simulated operator traces in a loop",
     )
     p.add_argument("--filter", default=None, help="orientation filter (default: the best)")
+    p.add_argument(
+        "--robot",
+        default="robonaut2-right",
+        help="robot: an arm, or a humanoid name or robot YAML (mocapkit robot list), drawn "
+        "from its meshes",
+    )
     p.add_argument("--ideal-sensors", action="store_true", help="no IMU noise or bias")
     p.add_argument("--seed", type=int, default=0, help="noise and mounting seed")
     p.add_argument("--json", action="store_true", help="print the session's figures at the end")
@@ -79,6 +86,7 @@ def _viewer(args: argparse.Namespace) -> int:
         filter_name=args.filter,
         sensor_noise=not args.ideal_sensors,
         seed=args.seed,
+        robot=args.robot,
     )
     sim = SimulatedSession(cfg)
     with sim, TeleopViewer(sim, host=args.host, port=args.port) as viewer:

@@ -28,7 +28,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -84,6 +84,8 @@ class SimulatedConfig:
         rate_hz: sample rate [Hz].
         heading_rad: where the operator faces [rad from world x].
         server: the robot server's settings.
+        robot: the robot: an arm (end-effector commands) or a humanoid name or robot YAML
+            (whole-body joint commands); the server runs the same robot.
         record: an MCAP file to record the session to (None: no recording).
         send_port: send the suit's datagrams to this loopback port instead of the
             session's own (a relay in front of it, e.g. to inject network faults).
@@ -101,6 +103,7 @@ class SimulatedConfig:
     rate_hz: float = 100.0
     heading_rad: float = 0.0
     server: ServerConfig = field(default_factory=ServerConfig)
+    robot: str = "robonaut2-right"
     record: str | None = None
     send_port: int | None = None
 
@@ -152,8 +155,9 @@ class SimulatedSession:
         tree = SensorTree.preset(c.preset)
         self.cycle = operator_cycle(c.shapes, tree, c.rate_hz, c.shape_s, heading_rad=c.heading_rad)
         self.pipeline_config = PipelineConfig(
-            preset=c.preset, fusion="host", filter_name=self.filter_name, rate_hz=c.rate_hz
-        )
+            preset=c.preset, fusion="host", filter_name=self.filter_name, rate_hz=c.rate_hz,
+            robot=c.robot,
+        )  # fmt: skip
         setup = SuitSetup(
             fusion="host",
             errors=ImuErrorModel.consumer_grade() if c.sensor_noise else None,
@@ -176,7 +180,7 @@ class SimulatedSession:
         c = self.config
         horizon = 1e6 if c.duration_s is None else c.duration_s + 120.0
         try:
-            self.server = spawn_robot_server(c.server, max_seconds=horizon)
+            self.server = spawn_robot_server(replace(c.server, robot=c.robot), max_seconds=horizon)
             self.live = LiveSession(
                 LiveConfig(pipeline=self.pipeline_config), self.server.address, record=c.record
             )

@@ -25,9 +25,9 @@ from typing import Any
 import numpy as np
 
 from mocapkit.errors import ConfigError, MocapkitError
-from mocapkit.geometry import quat_from_matrix
+from mocapkit.viz.robot_meshes import RobotMeshes
 from mocapkit.viz.tracks import ENDS, HumanTrack, RobotTrack, Track, frame_at, load_track
-from mocapkit.viz.viewer import ROBOT_RGB, SKELETON_RGB, import_viser
+from mocapkit.viz.viewer import SKELETON_RGB, import_viser
 
 log = logging.getLogger("mocapkit.viz.file_viewer")
 
@@ -128,28 +128,9 @@ class FileViewer:
         return out
 
     def _robot_scene(self, root: str, track: RobotTrack) -> list[tuple[Any, Any]]:
-        import pinocchio as pin
-        import trimesh
-
-        robot = track.robot
-        urdf = str(robot.spec.urdf)
-        dirs = [urdf.split("share/example-robot-data")[0] + "share"] if "share/" in urdf else []
-        dirs.append(str(robot.spec.urdf.parent))
-        gm = pin.buildGeomFromUrdf(robot.model, urdf, pin.GeometryType.VISUAL, package_dirs=dirs)
-        out: list[tuple[Any, Any]] = []
-        for g, obj in enumerate(gm.geometryObjects):
-            try:
-                mesh: Any = trimesh.load(obj.meshPath, force="mesh")
-            except (ValueError, OSError) as exc:  # a mesh format trimesh cannot read
-                track.notes.append(f"{obj.name}: not drawn ({exc})")
-                continue
-            mesh.apply_scale(np.asarray(obj.meshScale))
-            mesh.visual = trimesh.visual.ColorVisuals(mesh, face_colors=(*ROBOT_RGB, 255))
-            h = self.server.scene.add_mesh_trimesh(f"{root}/{obj.name}", mesh)
-            out.append((h, ("geom", g, gm)))
-        track_data = (gm, gm.createData(), robot.model.createData())
-        out.append((None, ("robot", track_data, None)))
-        return out
+        meshes = RobotMeshes(self.server.scene, root, track.robot)
+        track.notes.extend(meshes.notes)
+        return [(meshes, ("robot", None, None))]
 
     # -- GUI and playback -----------------------------------------------------------------------
     def _build_gui(self) -> None:
@@ -215,17 +196,8 @@ class FileViewer:
                 elif kind == "markers" and tr.markers is not None:
                     h.points = np.nan_to_num(tr.markers[i] + off, nan=-100.0)
             return
-        import pinocchio as pin
-
-        gm, gd, data = self._handles[k][-1][1][1]
-        pin.forwardKinematics(tr.robot.model, data, tr.q[i])
-        pin.updateGeometryPlacements(tr.robot.model, data, gm, gd)
-        for h, (kind, g, _) in self._handles[k]:
-            if kind != "geom":
-                continue
-            pl = gd.oMg[g]
-            h.position = tuple(np.asarray(pl.translation) + off)
-            h.wxyz = tuple(quat_from_matrix(np.asarray(pl.rotation)))
+        meshes = self._handles[k][0][0]
+        meshes.place(tr.q[i], off)
 
     def start(self) -> FileViewer:
         self._thread = threading.Thread(target=self._loop, name="mocapkit-view", daemon=True)

@@ -32,11 +32,11 @@ from mocapkit.geometry import quat_from_matrix
 from mocapkit.robot.model import ArmModel
 from mocapkit.viz.geometry import arm_frames, arm_points, polyline_segments
 from mocapkit.viz.live_api import LiveSession, LiveSnapshot
+from mocapkit.viz.robot_meshes import ROBOT_RGB, RobotMeshes, full_configuration
 
 log = logging.getLogger("mocapkit.viz.viewer")
 
 SKELETON_RGB = (40, 90, 220)
-ROBOT_RGB = (255, 140, 0)
 LATENCY_BUDGET_MS = 20.0
 _MAX_SEGMENTS = 32
 
@@ -83,6 +83,7 @@ class TeleopViewer:
         """(command, message) for every button press, oldest first."""
         self.updates = 0
         self._arm: ArmModel | None = None
+        self._humanoid: RobotMeshes | None = None
         self._arm_frames: tuple[str, ...] = ()
         self._sensor_handles: dict[str, Any] = {}
         self._stop = threading.Event()
@@ -220,6 +221,11 @@ class TeleopViewer:
     def _show_robot(self, s: LiveSnapshot) -> None:
         if s.robot_q is None:
             return
+        from mocapkit.robot.registry import available_robots
+
+        if s.robot_name not in available_robots():
+            self._show_humanoid(s)
+            return
         arm = self._arm_for(s.robot_name)
         pts = arm_points(arm, s.robot_q, self._arm_frames)
         self.robot_links.points = polyline_segments(pts).astype(np.float32)
@@ -232,6 +238,27 @@ class TeleopViewer:
             handle.visible = True
             handle.position = tuple(np.asarray(T)[:3, 3])
             handle.wxyz = tuple(quat_from_matrix(np.asarray(T)[:3, :3]))
+
+    def _show_humanoid(self, s: LiveSnapshot) -> None:
+        """A humanoid from its meshes at its reported base pose and joints, standing on the
+        ground beside the operator (the arm's lines and frames hidden)."""
+        if self._humanoid is None or self._humanoid.robot.spec.name != s.robot_name:
+            from mocapkit.retarget.robot_model import build_humanoid
+            from mocapkit.retarget.robot_spec import load_robot_spec
+
+            robot = build_humanoid(load_robot_spec(s.robot_name))
+            self._humanoid = RobotMeshes(self.server.scene, "/humanoid", robot)
+            for h in (self.robot_base, self.robot_links, self.ee_command, self.ee_actual):
+                h.visible = False
+        robot = self._humanoid.robot
+        if s.robot_q is None or s.robot_q.shape != robot.iq.shape:
+            return
+        T = s.ee_actual  # a humanoid's report carries its base pose
+        base = np.eye(4) if T is None else np.asarray(T)
+        q = full_configuration(robot, base[:3, 3], quat_from_matrix(base[:3, :3]), s.robot_q)
+        offset = np.array([self.robot_origin[0], self.robot_origin[1], 0.0])
+        offset[:2] -= q[:2] if robot.spec.floating_base else 0.0  # beside the operator
+        self._humanoid.place(q, offset)
 
     # -- running ----------------------------------------------------------------------------
     def _loop(self, seconds: float | None) -> None:
