@@ -19,24 +19,12 @@ from mocapkit.teleop.pipeline import PipelineConfig
 from mocapkit.teleop.recording import read_messages
 from mocapkit.teleop.sender import TimelineSender
 from mocapkit.teleop.server import ServerConfig, spawn_robot_server
+from tests.teleop.test_live import _sleep_until, _wait
 
 pytestmark = pytest.mark.realtime
 pytest.importorskip("pinocchio")
 
 IDS = {"upper_arm_r": 1, "forearm_r": 2}
-
-
-def _wait(pred, timeout=5.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(0.01)
-    return False
-
-
-def _sleep_until(t):
-    time.sleep(max(0.0, t - time.perf_counter()))
 
 
 def test_g1_follows_the_operators_arm_through_the_gate(tmp_path):

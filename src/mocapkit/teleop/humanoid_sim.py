@@ -24,41 +24,19 @@ humanoid's balance controller does that part).
 from __future__ import annotations
 
 import logging
-from collections import deque
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from mocapkit._validate import FloatArray
 from mocapkit.retarget.robot_model import Humanoid
 from mocapkit.teleop import protocol as proto
-
-if TYPE_CHECKING:
-    from mocapkit.teleop.server import ServerConfig
+from mocapkit.teleop.server import GatedSim, ServerConfig, SimState
 
 log = logging.getLogger("mocapkit.teleop.server")
 
 LIMIT_SLACK_RAD = 1e-3  # a command may touch a limit, not pass it
 
 
-@dataclass
-class HumanoidState:
-    gate: proto.Gate = proto.Gate.UNSYNCED
-    reason: proto.Reason = proto.Reason.STARTUP
-    last_command_seq: int = 0
-    last_command_t: float = -np.inf
-    last_accepted: FloatArray | None = None  # joints (n,)
-    target: tuple[FloatArray, FloatArray, FloatArray] | None = None  # pos, quat, joints
-    pending: deque[tuple[float, tuple[FloatArray, FloatArray, FloatArray]]] = field(
-        default_factory=deque
-    )
-    accepted: int = 0
-    rejected: int = 0
-    malformed: int = 0
-
-
-class HumanoidSim:
+class HumanoidSim(GatedSim):
     """See the module docstring; stepped by the caller with explicit times [s]."""
 
     def __init__(self, robot: Humanoid, config: ServerConfig) -> None:
@@ -71,7 +49,7 @@ class HumanoidSim:
         base = robot.q_ref[:7] if robot.spec.floating_base else np.array([0, 0, 0, 0, 0, 0, 1.0])
         self.base_pos = np.array(base[:3], dtype=float)
         self.base_quat = np.array([base[6], base[3], base[4], base[5]], dtype=float)  # wxyz
-        self.state = HumanoidState()
+        self.state = SimState()
         self.gate_joint_rad = config.gate_joint_rad
 
     @property
@@ -83,12 +61,6 @@ class HumanoidSim:
         m = self.robot.model
         by_q = {int(m.joints[j].idx_q): j for j in range(1, m.njoints)}
         return [by_q[int(i)] for i in self.robot.iq]
-
-    def _set(self, gate: proto.Gate, reason: proto.Reason) -> None:
-        s = self.state
-        if (gate, reason) != (s.gate, s.reason):
-            log.info("gate", extra={"gate": gate.name, "reason": reason.name, "from": s.gate.name})
-        s.gate, s.reason = gate, reason
 
     def on_command(self, cmd: proto.Command, now: float) -> bool:
         """An end-effector command: a humanoid takes joints (refused, counted)."""
@@ -135,23 +107,10 @@ class HumanoidSim:
         s.pending.append((now + c.latency_s, target))
         return True
 
-    def on_hold(self, now: float) -> None:
-        s = self.state
-        s.pending.clear()
-        s.target = None
-        s.last_accepted = None
-        self._set(proto.Gate.HOLDING, proto.Reason.HOLD_REQUESTED)
-
     def step(self, now: float, dt: float) -> None:
         """Advance the joints by one control tick of dt [s]."""
         s, c = self.state, self.config
-        if s.gate == proto.Gate.SYNCED and now - s.last_command_t > c.command_timeout_s:
-            s.pending.clear()
-            s.target = None
-            s.last_accepted = None
-            self._set(proto.Gate.UNSYNCED, proto.Reason.TIMEOUT)
-        while s.pending and s.pending[0][0] <= now:
-            s.target = s.pending.popleft()[1]
+        self._due(now)
         if s.target is None:
             return
         pos, quat, q = s.target

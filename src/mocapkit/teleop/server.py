@@ -34,7 +34,7 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -103,14 +103,47 @@ class SimState:
     last_command_seq: int = 0
     last_command_t: float = -np.inf
     last_accepted: FloatArray | None = None
-    target: FloatArray | None = None
-    pending: deque[tuple[float, FloatArray]] = field(default_factory=deque)
+    target: Any = None  # an arm's pose (4, 4); a humanoid's (base pos, base quat, joints)
+    pending: deque[tuple[float, Any]] = field(default_factory=deque)
     accepted: int = 0
     rejected: int = 0
     malformed: int = 0
 
 
-class RobotSim:
+class GatedSim:
+    """The safety gate's bookkeeping shared by the arm and the humanoid: its state, HOLD,
+    the command timeout and the actuation latency queue."""
+
+    state: SimState
+    config: ServerConfig
+
+    def _set(self, gate: proto.Gate, reason: proto.Reason) -> None:
+        s = self.state
+        if (gate, reason) != (s.gate, s.reason):
+            log.info("gate", extra={"gate": gate.name, "reason": reason.name, "from": s.gate.name})
+        s.gate, s.reason = gate, reason
+
+    def on_hold(self, now: float) -> None:
+        s = self.state
+        s.pending.clear()
+        s.target = None
+        s.last_accepted = None
+        self._set(proto.Gate.HOLDING, proto.Reason.HOLD_REQUESTED)
+
+    def _due(self, now: float) -> None:
+        """Drop the gate after ``command_timeout_s`` without commands; the accepted
+        commands whose latency has passed become the target."""
+        s, c = self.state, self.config
+        if s.gate == proto.Gate.SYNCED and now - s.last_command_t > c.command_timeout_s:
+            s.pending.clear()
+            s.target = None
+            s.last_accepted = None
+            self._set(proto.Gate.UNSYNCED, proto.Reason.TIMEOUT)
+        while s.pending and s.pending[0][0] <= now:
+            s.target = s.pending.popleft()[1]
+
+
+class RobotSim(GatedSim):
     """The robot's behaviour, stepped by the caller with explicit times [s]."""
 
     def __init__(self, arm: ArmModel, config: ServerConfig) -> None:
@@ -125,12 +158,6 @@ class RobotSim:
     def pose(self) -> FloatArray:
         """Actual end-effector pose T_base_ee (4, 4)."""
         return self.arm.fk(self.q)
-
-    def _set(self, gate: proto.Gate, reason: proto.Reason) -> None:
-        s = self.state
-        if (gate, reason) != (s.gate, s.reason):
-            log.info("gate", extra={"gate": gate.name, "reason": reason.name, "from": s.gate.name})
-        s.gate, s.reason = gate, reason
 
     def on_command(self, cmd: proto.Command, now: float) -> bool:
         """Gate a command; returns True when accepted."""
@@ -172,23 +199,10 @@ class RobotSim:
         log.warning("JOINTS command to an arm: send end-effector COMMAND messages")
         return False
 
-    def on_hold(self, now: float) -> None:
-        s = self.state
-        s.pending.clear()
-        s.target = None
-        s.last_accepted = None
-        self._set(proto.Gate.HOLDING, proto.Reason.HOLD_REQUESTED)
-
     def step(self, now: float, dt: float) -> None:
         """Advance the arm by one control tick of dt [s]."""
         s, c = self.state, self.config
-        if s.gate == proto.Gate.SYNCED and now - s.last_command_t > c.command_timeout_s:
-            s.pending.clear()
-            s.target = None
-            s.last_accepted = None
-            self._set(proto.Gate.UNSYNCED, proto.Reason.TIMEOUT)
-        while s.pending and s.pending[0][0] <= now:
-            s.target = s.pending.popleft()[1]
+        self._due(now)
         if s.target is None:
             return
         max_dq = self.arm.velocity_limit * c.velocity_scale * dt
