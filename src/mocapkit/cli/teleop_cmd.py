@@ -120,6 +120,13 @@ def register(sub: Any) -> None:
     rn.add_argument("--control-port", type=port, default=None, help="UDP control socket port")
     rn.add_argument("--keys", action="store_true", help="read commands from stdin lines")
     rn.add_argument("--record", type=Path, default=None, help="record the session (MCAP)")
+    rn.add_argument(
+        "--foxglove-port",
+        type=port,
+        default=None,
+        help="serve the live session to Foxglove (WebSocket, foxglove-sdk) on this loopback "
+        "port: body frames, robot joints, session state",
+    )
     rn.add_argument("--calibrate-seconds", type=float, default=1.0, help="calibration hold")
     rn.add_argument(
         "--robot-key-file",
@@ -241,6 +248,7 @@ def _run(args: argparse.Namespace) -> int:
         control_port=args.control_port,
         keys=sys.stdin if args.keys else None,
         record=args.record,
+        foxglove_port=args.foxglove_port,
     )
     summary = run_live(config, options)
     if args.json:

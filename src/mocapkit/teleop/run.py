@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -38,6 +39,8 @@ class RunOptions:
         control_port: UDP control socket port on loopback (None: no socket, 0: any).
         keys: a text stream of commands, one per line (the terminal), or None.
         record: an MCAP file for the session.
+        foxglove_port: serve the session to Foxglove (WebSocket) on this loopback port
+            (0: any free one), or None.
     """
 
     server: tuple[str, int] | None = None
@@ -47,6 +50,7 @@ class RunOptions:
     control_port: int | None = None
     keys: IO[str] | None = None
     record: Path | None = None
+    foxglove_port: int | None = None
 
 
 def parse_commands(text: str) -> tuple[tuple[float, str], ...]:
@@ -93,6 +97,13 @@ def run_live(
             if options.control_port is not None:
                 sock = stack.enter_context(ControlSocket(controls, port=options.control_port))
                 log.info("control socket on UDP 127.0.0.1:%d", sock.port)
+            if options.foxglove_port is not None:
+                from mocapkit.teleop.foxglove_live import FoxgloveLive
+
+                fox = FoxgloveLive(live.snapshot, port=options.foxglove_port)
+                stack.enter_context(fox.start())
+                print(f"teleop run: Foxglove: open a WebSocket connection to {fox.url}",
+                      file=sys.stderr, flush=True)  # fmt: skip
             if options.keys is not None:
                 threading.Thread(
                     target=read_keys, args=(controls, options.keys, done), daemon=True
