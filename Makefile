@@ -14,7 +14,7 @@ setup: $(STAMP)
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,viz,robots]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,viz,robots,lsl]'
 	@echo "compiling the numba kernels once (about a minute on 2 cores)"
 	$(BIN)/mocapkit demo --warm-up
 	@touch $(STAMP)
@@ -25,7 +25,7 @@ $(STAMP): pyproject.toml
 setup-bench: $(BENCH_STAMP)
 
 $(BENCH_STAMP): $(STAMP)
-	$(BIN)/python -m pip install --quiet -e '.[dev,viz,robots,bench,corpus,ros]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,viz,robots,lsl,bench,corpus,ros]'
 	@touch $(BENCH_STAMP)
 
 demo: $(STAMP)

@@ -127,6 +127,12 @@ def register(sub: Any) -> None:
         help="serve the live session to Foxglove (WebSocket, foxglove-sdk) on this loopback "
         "port: body frames, robot joints, session state",
     )
+    rn.add_argument(
+        "--lsl",
+        action="store_true",
+        help="LSL outlets (pylsl): mocapkit-joint-angles and mocapkit-orientations, one "
+        "sample per frame",
+    )
     rn.add_argument("--calibrate-seconds", type=float, default=1.0, help="calibration hold")
     rn.add_argument(
         "--robot-key-file",
@@ -249,6 +255,7 @@ def _run(args: argparse.Namespace) -> int:
         keys=sys.stdin if args.keys else None,
         record=args.record,
         foxglove_port=args.foxglove_port,
+        lsl=args.lsl,
     )
     summary = run_live(config, options)
     if args.json:

@@ -148,6 +148,9 @@ class LiveSession:
         self._recent_latency: deque[float] = deque(maxlen=1000)
         self._last_command: Any = None
         self._message = ""
+        self.frame_listeners: list[Callable[[Frame], None]] = []
+        """Called with every processed frame on the receiver's thread (keep them short:
+        e.g. an LSL outlet's push)."""
         self.sample_filter: Callable[[list[SuitSample]], list[SuitSample]] | None = None
         """Optional hook on each batch before the pipeline (fault injection in tests and
         the evaluation: e.g. NaN orientations)."""
@@ -330,6 +333,8 @@ class LiveSession:
             self._publish(now)
 
     def _on_frame(self, frame: Frame) -> None:
+        for listener in self.frame_listeners:
+            listener(frame)
         if frame.latency_ns is not None:
             self._recent_latency.append(frame.latency_ns / 1e6)
         if frame.command is not None:

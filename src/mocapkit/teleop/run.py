@@ -41,6 +41,8 @@ class RunOptions:
         record: an MCAP file for the session.
         foxglove_port: serve the session to Foxglove (WebSocket) on this loopback port
             (0: any free one), or None.
+        lsl: LSL outlets of the joint angles and the sensor orientations
+            (:mod:`mocapkit.io.lsl`).
     """
 
     server: tuple[str, int] | None = None
@@ -51,6 +53,7 @@ class RunOptions:
     keys: IO[str] | None = None
     record: Path | None = None
     foxglove_port: int | None = None
+    lsl: bool = False
 
 
 def parse_commands(text: str) -> tuple[tuple[float, str], ...]:
@@ -104,6 +107,8 @@ def run_live(
                 stack.enter_context(fox.start())
                 print(f"teleop run: Foxglove: open a WebSocket connection to {fox.url}",
                       file=sys.stderr, flush=True)  # fmt: skip
+            if options.lsl:
+                _lsl_outlets(live)
             if options.keys is not None:
                 threading.Thread(
                     target=read_keys, args=(controls, options.keys, done), daemon=True
@@ -132,6 +137,18 @@ def run_live(
             for tr in live.session.transitions
         ]
     return summary
+
+
+def _lsl_outlets(live: LiveSession) -> None:
+    """LSL outlets fed by every frame of the session (``mocapkit.io.lsl``)."""
+    from mocapkit.io.lsl import SessionOutlets
+
+    tree = live.pipeline.tree
+    outlets = SessionOutlets(tree.coordinate_names, tree.sensor_names,
+                             live.config.pipeline.rate_hz)  # fmt: skip
+    live.frame_listeners.append(lambda f: outlets.push(f.angles, live.pipeline.q_sensor))
+    print("teleop run: LSL outlets mocapkit-joint-angles and mocapkit-orientations",
+          file=sys.stderr, flush=True)  # fmt: skip
 
 
 def _percentile(values: Sequence[float] | Any, q: float) -> float:
