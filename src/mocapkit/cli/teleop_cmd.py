@@ -133,6 +133,14 @@ def register(sub: Any) -> None:
         help="LSL outlets (pylsl): mocapkit-joint-angles and mocapkit-orientations, one "
         "sample per frame",
     )
+    rn.add_argument(
+        "--ros2-zenoh",
+        default=None,
+        metavar="ENDPOINTS",
+        help="publish ROS 2 JointState topics over Zenoh in rmw_zenoh's format to these "
+        "comma-separated endpoints (a ROS machine's rmw_zenohd, e.g. tcp/127.0.0.1:7447; "
+        "'' for Zenoh's scouting)",
+    )
     rn.add_argument("--calibrate-seconds", type=float, default=1.0, help="calibration hold")
     rn.add_argument(
         "--robot-key-file",
@@ -256,6 +264,9 @@ def _run(args: argparse.Namespace) -> int:
         record=args.record,
         foxglove_port=args.foxglove_port,
         lsl=args.lsl,
+        ros2_zenoh=None
+        if args.ros2_zenoh is None
+        else tuple(e for e in args.ros2_zenoh.split(",") if e),
     )
     summary = run_live(config, options)
     if args.json:

@@ -43,6 +43,8 @@ class RunOptions:
             (0: any free one), or None.
         lsl: LSL outlets of the joint angles and the sensor orientations
             (:mod:`mocapkit.io.lsl`).
+        ros2_zenoh: Zenoh endpoints of a ROS 2 (rmw_zenoh) router to publish the joint
+            states to (:mod:`mocapkit.io.ros2_zenoh`; empty: Zenoh's scouting), or None.
     """
 
     server: tuple[str, int] | None = None
@@ -54,6 +56,7 @@ class RunOptions:
     record: Path | None = None
     foxglove_port: int | None = None
     lsl: bool = False
+    ros2_zenoh: tuple[str, ...] | None = None
 
 
 def parse_commands(text: str) -> tuple[tuple[float, str], ...]:
@@ -109,6 +112,8 @@ def run_live(
                       file=sys.stderr, flush=True)  # fmt: skip
             if options.lsl:
                 _lsl_outlets(live)
+            if options.ros2_zenoh is not None:
+                stack.enter_context(_ros2_topics(live, options.ros2_zenoh))
             if options.keys is not None:
                 threading.Thread(
                     target=read_keys, args=(controls, options.keys, done), daemon=True
@@ -149,6 +154,30 @@ def _lsl_outlets(live: LiveSession) -> None:
     live.frame_listeners.append(lambda f: outlets.push(f.angles, live.pipeline.q_sensor))
     print("teleop run: LSL outlets mocapkit-joint-angles and mocapkit-orientations",
           file=sys.stderr, flush=True)  # fmt: skip
+
+
+def _ros2_topics(live: LiveSession, connect: tuple[str, ...]) -> Any:
+    """Every frame's joint angles and robot joints as ROS 2 JointState over Zenoh."""
+    from mocapkit.io.ros2_zenoh import Ros2ZenohPublisher
+
+    pub = Ros2ZenohPublisher(connect=connect)
+    coords = live.pipeline.tree.coordinate_names
+    robot = live.pipeline.robot_joint_names
+
+    def on_frame(f: Any) -> None:
+        try:
+            if f.angles is not None:
+                pub.joint_state("/mocapkit/joint_states", coords, f.angles)
+            if f.q_robot is not None:
+                pub.joint_state("/mocapkit/robot/joint_states", robot, f.q_robot)
+        except Exception as exc:  # a Zenoh peer that disappears must not stop the session
+            log.warning("ROS 2 over Zenoh: %s", exc)
+
+    live.frame_listeners.append(on_frame)
+    where = ", ".join(connect) or "scouting"
+    print(f"teleop run: ROS 2 topics /mocapkit/joint_states, /mocapkit/robot/joint_states "
+          f"over Zenoh ({where})", file=sys.stderr, flush=True)  # fmt: skip
+    return pub
 
 
 def _percentile(values: Sequence[float] | Any, q: float) -> float:
