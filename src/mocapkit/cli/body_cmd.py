@@ -281,7 +281,9 @@ def register(subparsers: Any) -> None:
         help="with --dropout hold: how long a missing sensor is held [s]",
     )
     a.add_argument("--start", type=float, help="ignore samples before this time [s]")
-    a.add_argument("--stop", type=float, help="ignore samples after this time [s]")
+    a.add_argument(
+        "--end", "--stop", dest="stop", type=float, help="ignore samples after this time [s]"
+    )
     a.add_argument("-o", "--output", help="joint angles .mot")
     a.add_argument("--bvh", help="BVH file of the segment orientations")
     a.add_argument("--bone", action="append", metavar="SEGMENT=BONE", help="BVH bone name")

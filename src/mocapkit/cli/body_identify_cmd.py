@@ -117,7 +117,9 @@ def register(sub: Any) -> None:
         "--known", action="append", metavar="SEGMENT=SENSOR", help="pin a sensor you know"
     )
     p.add_argument("--start", type=float, help="ignore samples before this time [s]")
-    p.add_argument("--stop", type=float, help="ignore samples after this time [s]")
+    p.add_argument(
+        "--end", "--stop", dest="stop", type=float, help="ignore samples after this time [s]"
+    )
     p.add_argument("-o", "--output", help="write {segment: sensor} (JSON) for --map-file")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
     p.set_defaults(func=_cmd_identify)

@@ -13,7 +13,7 @@ from mocapkit.cli.common import EXIT_OK, StepProgress, print_json
 _EXAMPLES = """\
 examples:
   mocapkit demo                              # everything; prints the report's path
-  mocapkit demo --out /tmp/demo --shape circle
+  mocapkit demo -o /tmp/demo --shape circle
   mocapkit demo --sections imu --json        # only the orientation filters, as JSON
   mocapkit demo --warm-up                    # compile the kernels once (make setup does)
 
@@ -41,7 +41,10 @@ def register(sub: Any) -> None:
         epilog=_EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    demo.add_argument("--out", type=Path, default=Path("mocapkit-demo"), help="output folder")
+    demo.add_argument(
+        "-o", "--output", "--out", dest="out", type=Path, default=Path("mocapkit-demo"),
+        help="output folder",
+    )  # fmt: skip
     demo.add_argument("--shape", default="infinity", choices=SHAPES, help="operator's shape")
     demo.add_argument(
         "--shape-seconds", type=float, default=6.0, help="duration of the shape [s] (1-60)"

@@ -90,10 +90,15 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         type=Path,
         default=None,
         help="OpenSim IK setup XML (e.g. subject01_Setup_IK.xml): its marker weights, "
-        "coordinate tasks and time range (--start-s/--end-s win)",
+        "coordinate tasks and time range (--start/--end win)",
     )
-    p.add_argument("--start-s", type=float, default=None, help="first time to use [s]")
-    p.add_argument("--end-s", type=float, default=None, help="last time to use [s]")
+    p.add_argument(
+        "--start", "--start-s", dest="start_s", type=float, default=None,
+        help="first time to use [s]",
+    )  # fmt: skip
+    p.add_argument(
+        "--end", "--end-s", dest="end_s", type=float, default=None, help="last time to use [s]"
+    )
     p.add_argument(
         "--substeps", type=int, default=2, help="simulation steps per frame for osc (default 2)"
     )

@@ -117,7 +117,9 @@ def register(sub: Any) -> None:
             "none",
         )
         if name == "record":
-            r.add_argument("--out", required=True, help="MCAP file to write")
+            r.add_argument(
+                "-o", "--output", "--out", dest="out", required=True, help="MCAP file to write"
+            )
         else:
             r.add_argument("--record", help="also record to this MCAP file")
         r.set_defaults(func=_receive)
