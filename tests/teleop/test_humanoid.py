@@ -111,10 +111,10 @@ def test_session_aligns_step_by_step_then_follows_and_holds_on_a_glitch():
     assert "glitch" in s.transitions[-1].reason
     out = s.tick_joints(t + 0.03, _target(goal), goal, 0.0, None, proto.Gate.SYNCED)
     assert s.state == State.HELD  # a glitch waits for the operator
-    s.engage(t + 0.04)  # held is not disabled: engage() only re-arms from disabled
-    s.disable(t + 0.04)
-    s.engage(t + 0.05)
+    s.engage(t + 0.04)  # ... who engages again: aligned from the robot's joints first
     assert s.state == State.ALIGNING
+    out = s.tick_joints(t + 0.05, _target(goal + 0.5), goal, 0.0, None, proto.Gate.SYNCED)
+    assert np.abs(out.joints[2] - goal).max() <= s.align_speed_rad_s * 0.02 + 1e-12  # 20 ms
 
 
 def test_session_holds_on_a_fault_and_realigns_when_it_clears():

@@ -56,7 +56,12 @@ class HumanoidSession(TeleopSession):
         self._glitch = False
 
     def engage(self, t: float) -> None:
+        """Start from disabled, or re-arm a session held by a glitch: align first."""
         self._glitch = False
+        if self.state == State.HELD:
+            self._last_cmd = None
+            self._go(t, State.ALIGNING, "operator engaged")
+            return
         super().engage(t)
 
     def _hold(self, t: float, reason: str, out: TickOutput) -> TickOutput:
