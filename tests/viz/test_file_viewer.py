@@ -14,6 +14,7 @@ from mocapkit.body.sensor_tree import SensorTree
 from mocapkit.body.simulate import gait_coordinates
 from mocapkit.errors import ConfigError
 from tests.viz.browser import chromium, color_pixels, free_port, png_rgb, save_artifact
+from tests.viz.test_viewer_browser import _FIND_BUTTON, _wait
 
 pytest.importorskip("viser", reason="the viewer needs the viz extra (pip install -e '.[viz]')")
 pytest.importorskip("pinocchio")
@@ -78,22 +79,6 @@ def test_a_file_it_cannot_read_is_named_and_the_others_shown(walk_files, tmp_pat
         assert v.frames_drawn == n + 1
     with FileViewer(port=free_port()) as v, pytest.raises(ConfigError, match="nothing to show"):
         v.load([bad])
-
-
-_FIND_BUTTON = """
-return Array.from(document.querySelectorAll('button'))
-    .find(b => b.innerText.trim() === arguments[0] && b.offsetParent !== null) || null;
-"""
-
-
-def _wait(cond: Any, timeout_s: float, what: str) -> Any:
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        value = cond()
-        if value:
-            return value
-        time.sleep(0.1)
-    raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
 
 
 @pytest.mark.realtime

@@ -27,6 +27,10 @@ quarter of the windows is not followed (noted): it keeps the pose alignment alon
 real recordings here the hips are such pairs (the pelvis sensor's and the thigh's
 horizontal joint-centre accelerations agree poorly: coherence ~0.5, soft tissue), while
 knees, ankles, spine, shoulders, elbows and wrists are followed.
+
+Honest caveat: the constants below (window, knots, coherence and window-share thresholds,
+smoothness) were set while looking at the simulated closed loop and the real recordings
+that docs/benchmarks.md reports them on; there is no held-out set of recordings yet.
 """
 
 from __future__ import annotations

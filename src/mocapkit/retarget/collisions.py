@@ -16,6 +16,9 @@ the meshes' on 1,600 random pairs of G1 and Talos).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from typing import Any
+
 import numpy as np
 
 from mocapkit._validate import FloatArray
@@ -140,28 +143,25 @@ class SelfCollision:
             return False
         return bool(pin.computeCollision(self.gm, self.gd, k))
 
-    def any_colliding(self, q: FloatArray) -> bool:
-        """Whether any checked pair intersects in ``q`` (stops at the first, the closest
-        pairs first)."""
+    def _hits(self, q: FloatArray) -> Iterator[int]:
+        """Indices (into ``pairs``) of the pairs that intersect in ``q``, the closest
+        first, found one by one (a caller may stop at the first)."""
         import pinocchio as pin
 
         if not self.available or not len(self.pairs):
-            return False
+            return
         pin.forwardKinematics(self.robot.model, self.data, q)
         cand = self._candidates(0.0)
         pin.updateGeometryPlacements(self.robot.model, self.data, self.hm, self.hd)
-        return any(self._pair_collides(int(k)) for k in cand)
+        yield from (int(k) for k in cand if self._pair_collides(int(k)))
+
+    def any_colliding(self, q: FloatArray) -> bool:
+        """Whether any checked pair intersects in ``q`` (stops at the first)."""
+        return next(self._hits(q), None) is not None
 
     def colliding_pairs(self, q: FloatArray) -> list[int]:
         """Indices (into ``pairs``) of the pairs that intersect in ``q``."""
-        import pinocchio as pin
-
-        if not self.available or not len(self.pairs):
-            return []
-        pin.forwardKinematics(self.robot.model, self.data, q)
-        cand = self._candidates(0.0)
-        pin.updateGeometryPlacements(self.robot.model, self.data, self.hm, self.hd)
-        return [int(k) for k in cand if self._pair_collides(int(k))]
+        return list(self._hits(q))
 
     def joints_between(self, pairs: list[int]) -> set[int]:
         """The joints on the kinematic paths between the bodies of ``pairs`` (not their
@@ -227,11 +227,15 @@ class HullAvoidance:
             self.floor[k] = min(MIN_DISTANCE, d_ref)
         self.parent = [int(o.parentJoint) for o in coll.hm.geometryObjects]
 
-    def rows(self, q: FloatArray, pairs: list[int] | None = None) -> tuple[FloatArray, FloatArray]:
+    def rows(
+        self, q: FloatArray, pairs: list[int] | None = None, data: Any = None
+    ) -> tuple[FloatArray, FloatArray]:
         """(C (MAX_ROWS, nv), u (MAX_ROWS,)) with ``C dq <= u``; unused rows are zero with a
         huge bound. A pair nearer than its floor must move apart (by at most
         ``RECOVER_PER_STEP`` a step). ``pairs``: only these (indices into the checked
-        pairs), else every pair near enough."""
+        pairs), else every pair near enough. ``data``: the caller's Pinocchio data with
+        the joint placements and Jacobians of ``q`` already computed (the QP's), else they
+        are computed here."""
         import pinocchio as pin
 
         coll = self.coll
@@ -241,13 +245,15 @@ class HullAvoidance:
         u_out = np.full(MAX_ROWS, 1e20)
         if not self.available:
             return c_out, u_out
-        pin.forwardKinematics(robot.model, self.data, q)
-        pin.updateGeometryPlacements(robot.model, self.data, coll.gm, coll.gd)
+        d = self.data if data is None else data
+        if data is None:
+            pin.computeJointJacobians(robot.model, d, q)  # and the joint placements
+        pin.updateGeometryPlacements(robot.model, d, coll.gm, coll.gd)
         cand = (coll._candidates_placed(ACTIVE_DISTANCE + MIN_DISTANCE) if pairs is None
                 else np.asarray(pairs, dtype=np.int64))  # fmt: skip
         if not len(cand):
             return c_out, u_out
-        pin.updateGeometryPlacements(robot.model, self.data, coll.hm, self.hd)
+        pin.updateGeometryPlacements(robot.model, d, coll.hm, self.hd)
         near = []
         for k in cand:
             on_mesh = bool(self.on_mesh[k])
@@ -259,7 +265,6 @@ class HullAvoidance:
         near.sort(key=lambda x: x[0])
         if not near:
             return c_out, u_out
-        pin.computeJointJacobians(robot.model, self.data, q)
         lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         objs = coll.pairs
         for i, (slack, k, res) in enumerate(near[:MAX_ROWS]):
@@ -272,8 +277,8 @@ class HullAvoidance:
             if not np.isfinite(n).all() or float(np.linalg.norm(n)) < 1e-9:
                 continue
             n = n / np.linalg.norm(n)
-            ja = self._point_jacobian(self.parent[a], pa, lwa)
-            jb = self._point_jacobian(self.parent[b], pb, lwa)
+            ja = self._point_jacobian(d, self.parent[a], pa, lwa)
+            jb = self._point_jacobian(d, self.parent[b], pb, lwa)
             row = n @ (ja - jb)  # the distance shrinks at n . (v_a - v_b)
             if float(np.linalg.norm(row)) < 1e-2:
                 continue
@@ -281,11 +286,11 @@ class HullAvoidance:
             u_out[i] = max(float(slack), -RECOVER_PER_STEP)
         return c_out, u_out
 
-    def _point_jacobian(self, joint: int, point: FloatArray, frame: object) -> FloatArray:
+    def _point_jacobian(self, d: Any, joint: int, point: FloatArray, frame: object) -> FloatArray:
         import pinocchio as pin
 
-        jac = pin.getJointJacobian(self.coll.robot.model, self.data, joint, frame)
-        r = point - self.data.oMi[joint].translation
+        jac = pin.getJointJacobian(self.coll.robot.model, d, joint, frame)
+        r = point - d.oMi[joint].translation
         skew = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
         return jac[:3] - skew @ jac[3:]
 

@@ -3,6 +3,7 @@ base), its reference configuration on the ground facing +x, limits and frame ids
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,6 +34,14 @@ class Humanoid:
     # position and velocity limits; continuous joints (nq 2, nv 1) have no position limit
     ref_pose: dict[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)
     # ref_pose: every named frame's (position, rotation) in the reference posture, once
+
+    @functools.cached_property
+    def iq_names(self) -> tuple[str, ...]:
+        """The one-DOF joints' names in the order of ``iq`` (what a JOINTS message and the
+        robot server's reports carry)."""
+        m = self.model
+        by_q = {int(m.joints[j].idx_q): m.names[j] for j in range(1, m.njoints)}
+        return tuple(str(by_q[int(i)]) for i in self.iq)
 
     @property
     def n_base_q(self) -> int:

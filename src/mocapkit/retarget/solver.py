@@ -193,7 +193,7 @@ class FrameSolver:
             hi[iv] = np.minimum(hi[iv], FIRST_STEP_RAD)
         c, u = self._ground()
         if avoid is not None:
-            ca, ua = avoid.rows(self.q, pairs)
+            ca, ua = avoid.rows(self.q, pairs, d)  # d: this q's placements and Jacobians
             if hard:  # the rows as constraints; soft when no step meets them all
                 x = self._solve_qp(h, g, np.vstack([c, ca]), np.concatenate([u, ua]), lo, hi)
                 if x is not None:

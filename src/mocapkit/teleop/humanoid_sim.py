@@ -54,13 +54,7 @@ class HumanoidSim(GatedSim):
 
     @property
     def joint_names(self) -> tuple[str, ...]:
-        names = self.robot.model.names
-        return tuple(names[int(j)] for j in self._joint_ids())
-
-    def _joint_ids(self) -> list[int]:
-        m = self.robot.model
-        by_q = {int(m.joints[j].idx_q): j for j in range(1, m.njoints)}
-        return [by_q[int(i)] for i in self.robot.iq]
+        return self.robot.iq_names
 
     def on_command(self, cmd: proto.Command, now: float) -> bool:
         """An end-effector command: a humanoid takes joints (refused, counted)."""
@@ -71,7 +65,7 @@ class HumanoidSim(GatedSim):
 
     def on_joints(self, cmd: proto.JointsCommand, now: float) -> bool:
         """Gate a joint command; returns True when accepted."""
-        s, c = self.state, self.config
+        s = self.state
         q = np.asarray(cmd.q, dtype=float)
         quat = np.asarray(cmd.base_quat, dtype=float)
         bad = (
@@ -88,24 +82,13 @@ class HumanoidSim(GatedSim):
         if s.gate == proto.Gate.SYNCED:
             assert s.last_accepted is not None
             if float(np.max(np.abs(q - s.last_accepted))) > self.gate_joint_rad:
-                s.rejected += 1
-                s.pending.clear()
-                s.target = None
-                self._set(proto.Gate.UNSYNCED, proto.Reason.JUMP)
-                return False
+                return self._jumped()
         else:
             if float(np.max(np.abs(q - self.joints))) > self.gate_joint_rad:
-                s.rejected += 1
-                self._set(s.gate, proto.Reason.TOO_FAR)
-                return False
+                return self._too_far()
             self._set(proto.Gate.SYNCED, proto.Reason.OK)
-        s.accepted += 1
-        s.last_accepted = q
-        s.last_command_seq = cmd.seq
-        s.last_command_t = now
         target = (np.asarray(cmd.base_pos, dtype=float), quat / np.linalg.norm(quat), q)
-        s.pending.append((now + c.latency_s, target))
-        return True
+        return self._accept(cmd.seq, now, q, target)
 
     def step(self, now: float, dt: float) -> None:
         """Advance the joints by one control tick of dt [s]."""

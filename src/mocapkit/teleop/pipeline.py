@@ -538,10 +538,7 @@ class TeleopPipeline:
     def robot_joint_names(self) -> tuple[str, ...]:
         """The robot's joints as ``q_robot`` lists them."""
         if self.humanoid is not None:
-            r = self.humanoid.robot
-            names = r.model.names
-            by_q = {int(r.model.joints[j].idx_q): names[j] for j in range(1, r.model.njoints)}
-            return tuple(by_q[int(i)] for i in r.iq)
+            return self.humanoid.robot.iq_names
         assert self.arm is not None
         return tuple(self.arm.joint_names)
 

@@ -130,6 +130,32 @@ class GatedSim:
         s.last_accepted = None
         self._set(proto.Gate.HOLDING, proto.Reason.HOLD_REQUESTED)
 
+    def _jumped(self) -> bool:
+        """Refuse a synchronised command that jumped: the gate drops, nothing pending."""
+        s = self.state
+        s.rejected += 1
+        s.pending.clear()
+        s.target = None
+        self._set(proto.Gate.UNSYNCED, proto.Reason.JUMP)
+        return False
+
+    def _too_far(self) -> bool:
+        """Refuse an unsynchronised command too far from the robot's actual state."""
+        self.state.rejected += 1
+        self._set(self.state.gate, proto.Reason.TOO_FAR)
+        return False
+
+    def _accept(self, seq: int, now: float, accepted: Any, target: Any) -> bool:
+        """Take a command: ``accepted`` is what the next jump check compares with,
+        ``target`` acts after the actuation latency."""
+        s = self.state
+        s.accepted += 1
+        s.last_accepted = accepted
+        s.last_command_seq = seq
+        s.last_command_t = now
+        s.pending.append((now + self.config.latency_s, target))
+        return True
+
     def _due(self, now: float) -> None:
         """Drop the gate after ``command_timeout_s`` without commands; the accepted
         commands whose latency has passed become the target."""
@@ -173,24 +199,13 @@ class RobotSim(GatedSim):
             assert s.last_accepted is not None
             dp, dr = pose_distance(T, s.last_accepted)
             if dp > c.gate_pos_m or dr > c.gate_rot_rad:
-                s.rejected += 1
-                s.pending.clear()
-                s.target = None
-                self._set(proto.Gate.UNSYNCED, proto.Reason.JUMP)
-                return False
+                return self._jumped()
         else:
             dp, dr = pose_distance(T, self.pose())
             if dp > c.gate_pos_m or dr > c.gate_rot_rad:
-                s.rejected += 1
-                self._set(s.gate, proto.Reason.TOO_FAR)
-                return False
+                return self._too_far()
             self._set(proto.Gate.SYNCED, proto.Reason.OK)
-        s.accepted += 1
-        s.last_accepted = T
-        s.last_command_seq = cmd.seq
-        s.last_command_t = now
-        s.pending.append((now + c.latency_s, T))
-        return True
+        return self._accept(cmd.seq, now, T, T)
 
     def on_joints(self, cmd: proto.JointsCommand, now: float) -> bool:
         """A joint command: an arm takes end-effector poses (refused, counted)."""

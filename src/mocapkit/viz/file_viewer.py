@@ -64,7 +64,8 @@ class FileViewer:
         self.t1 = 0.0
         self.playing = False
         self.frames_drawn = 0
-        self._handles: list[list[tuple[Any, Any]]] = []  # per track: (handle, updater)
+        # per track: a human's (handle, (kind, from, to)) list, or a robot's meshes
+        self._scenes: list[list[tuple[Any, tuple[str, str, str]]] | RobotMeshes] = []
         self._offsets: list[np.ndarray] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -100,15 +101,17 @@ class FileViewer:
             f"{root}/label", track.name, position=(0.0, -SPACING_M * k, 2.1)
         )
         if isinstance(track, HumanTrack):
-            self._handles.append(self._human_scene(root, track))
+            self._scenes.append(self._human_scene(root, track))
         else:
-            self._handles.append(self._robot_scene(root, track))
+            meshes = RobotMeshes(self.server.scene, root, track.robot)
+            track.notes.extend(meshes.notes)
+            self._scenes.append(meshes)
 
-    def _human_scene(self, root: str, track: HumanTrack) -> list[tuple[Any, Any]]:
+    def _human_scene(self, root: str, track: HumanTrack) -> list[tuple[Any, tuple[str, str, str]]]:
         import trimesh
 
         m = track.motion
-        out: list[tuple[Any, Any]] = []
+        out: list[tuple[Any, tuple[str, str, str]]] = []
         for a, b in track.bones():
             length = float(np.nanmedian(np.linalg.norm(m.pos[b] - m.pos[a], axis=1)))
             mesh = trimesh.creation.capsule(height=max(length, 1e-3), radius=BONE_RADIUS_M)
@@ -126,11 +129,6 @@ class FileViewer:
             )
             out.append((h, ("markers", "", "")))
         return out
-
-    def _robot_scene(self, root: str, track: RobotTrack) -> list[tuple[Any, Any]]:
-        meshes = RobotMeshes(self.server.scene, root, track.robot)
-        track.notes.extend(meshes.notes)
-        return [(meshes, ("robot", None, None))]
 
     # -- GUI and playback -----------------------------------------------------------------------
     def _build_gui(self) -> None:
@@ -177,7 +175,9 @@ class FileViewer:
         i = frame_at(tr.time, t)
         if isinstance(tr, HumanTrack):
             m = tr.motion
-            for h, (kind, a, b) in self._handles[k]:
+            scene = self._scenes[k]
+            assert isinstance(scene, list)
+            for h, (kind, a, b) in scene:
                 if kind == "bone":
                     pa, pb = m.pos[a][i], m.pos[b][i]
                     d = pb - pa
@@ -196,7 +196,8 @@ class FileViewer:
                 elif kind == "markers" and tr.markers is not None:
                     h.points = np.nan_to_num(tr.markers[i] + off, nan=-100.0)
             return
-        meshes = self._handles[k][0][0]
+        meshes = self._scenes[k]
+        assert isinstance(meshes, RobotMeshes)
         meshes.place(tr.q[i], off)
 
     def start(self) -> FileViewer:
