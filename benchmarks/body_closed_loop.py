@@ -154,7 +154,7 @@ def run(seed: int, tree: SensorTree, time: np.ndarray, coords: dict[str, np.ndar
             for name, rec in recs.items()
         }
         runs = ["npose", "auto"] + (["auto (pose headings)"] if mode == "9d" else [])
-        runs += ["auto (joint headings)"] if mode == "6d" else []
+        runs += ["auto (joint headings)"]
         for calibration in runs:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -167,6 +167,7 @@ def run(seed: int, tree: SensorTree, time: np.ndarray, coords: dict[str, np.ndar
                     align = "pose"
                 if calibration == "auto (joint headings)":
                     use, _ = align_headings_by_joints(tree, oris, recs)
+                    align = "joints"
                 res = run_body(
                     tree, use, calibration=calibration.split(" ")[0],
                     window=(0.5, STILL_S - 0.5),

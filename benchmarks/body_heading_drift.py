@@ -85,7 +85,7 @@ def measure(path: Path, preset: str, start: float | None) -> tuple[list[str], li
     six = run_filter(raw, "polaris-body", "6d")
     res_pose = _run(tree, six, start, "pose")
     turned, info = align_headings_by_joints(tree, six, raw)
-    res_joints = _run(tree, turned, start, "pose")
+    res_joints = _run(tree, turned, start, "joints")
     pose, joints = res_pose.body.angles, res_joints.body.angles
     hinge_rows = []
     for parent, child in HINGES:

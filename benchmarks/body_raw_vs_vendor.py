@@ -36,8 +36,8 @@ RECORDINGS = (
      "full_body_15", 40.3, False),
     ("x-IMU3 lower body", SHARED / "ximu3-lower-body", "lower_body", None, True),
 )  # fmt: skip
-SOURCES = (("polaris-body", "9d"), ("polaris-body", "6d"), ("polaris-body", "6d joints"),
-           ("bachmann", "9d"))  # fmt: skip
+SOURCES = (("polaris-body", "9d"), ("polaris-body", "9d joints"), ("polaris-body", "6d"),
+           ("polaris-body", "6d joints"), ("bachmann", "9d"))  # fmt: skip
 
 
 def _angles(tree: SensorTree, oris: dict, start: float | None, align: str):  # type: ignore[no-untyped-def, type-arg]
@@ -55,10 +55,11 @@ def compare(
     out = {}
     samples = read_raw(path, fmt)
     for name, mode in SOURCES:
-        align = "shared" if (has_mag and mode == "9d") else "pose"
+        align = "shared" if (has_mag and mode.startswith("9d")) else "pose"
         oris = run_filter(samples, name, mode.split(" ")[0])
         if mode.endswith("joints"):  # 6D headings kept aligned by the joints
             oris, _ = align_headings_by_joints(tree, oris, samples)
+            align = "joints"  # as body angles --heading-alignment joints does
         raw = _angles(tree, oris, start, align)
         diffs = {}
         for coord in vendor.names:

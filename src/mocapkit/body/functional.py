@@ -5,12 +5,18 @@ Per segment, two directions known in the segment frame are measured in the senso
 
 - **up**: gravity in a still window (the calibration pose says where up is in each
   segment: ``q_ground_segment(pose)^-1 * y_ground``);
-- **flexion axis** (for segments marked ``functional: flexion``): the dominant rotation
-  axis of the sensor while the subject moves (principal axis of its angular rate, computed
-  from the orientations, without the part about the world vertical, so that turning on
-  the spot does not count) is taken to be the first axis of the segment's own joint (hip,
-  knee and ankle flexion, shoulder flexion, elbow flexion: in gait and most everyday
-  motion close to the body's lateral axis).
+- **flexion axis** (for segments marked ``functional: flexion``), preferably from a
+  **hinge** the segment takes part in (knee, elbow, ankle; :func:`hinge_axes`): the
+  rotation of the child's sensor relative to the parent's is about the joint's axis,
+  fixed in both, whatever the rest of the body does; the elbow and the ankle have a
+  second axis fixed in the child (pronation, subtalar), taken out by a two-axis fit. This
+  needs the two sensors in one world (``shared``, or ``joints`` after
+  :mod:`mocapkit.body.joint_headings`); ball joints (hip, shoulder) are not hinges.
+  Otherwise the dominant rotation axis of the sensor itself while the subject moves
+  (principal axis of its angular rate, without the part about the world vertical, so
+  that turning on the spot does not count) is taken to be the first axis of the
+  segment's own joint (hip flexion, shoulder flexion: in gait close to the body's lateral
+  axis, but a shoulder's swing leans 15-20 deg with its abduction and rotation).
 
 The two give the mounting ``q_sensor_segment`` up to the sign of the lateral axis, and
 without using any world heading (so they hold for 6D filters whose headings are unrelated).
@@ -23,9 +29,10 @@ a usable functional axis (pelvis, trunk) are calibrated from the pose at heading
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.linalg import eigh
 from scipy.ndimage import uniform_filter1d
 
 from mocapkit._validate import FloatArray
@@ -47,7 +54,13 @@ from mocapkit.body.calibration import (
 from mocapkit.body.joint_angles import compose_pose
 from mocapkit.body.sensor_tree import SensorTree
 from mocapkit.errors import ConfigError
-from mocapkit.geometry import quat_conj, quat_from_matrix, quat_mul, quat_rotate
+from mocapkit.geometry import (
+    quat_conj,
+    quat_from_matrix,
+    quat_mul,
+    quat_rotate,
+    quat_to_matrix,
+)
 from mocapkit.series import OrientationSeries
 
 # Coordinates that are positive (flexion) for most of any everyday motion: they tell a
@@ -58,6 +71,16 @@ FLEXION_COORDINATES = ("knee_angle_r", "knee_angle_l", "elbow_flex_r", "elbow_fl
 # the rotation energy and is at least this far from the segment's up axis.
 MIN_SHARE = 0.6
 MIN_AXIS_FROM_UP_DEG = 45.0
+# A joint's relative rotation counts as a hinge's when this share of its energy is about
+# one axis (simulated walking: knees 0.99, ankles 0.98, elbows 0.85-0.88 with the
+# forearm's pronation beside the flexion; the 15-IMU recording's walks: knees 0.84-0.87,
+# elbows 0.82-0.89; its sit-down alone: knees 0.71-0.84).
+HINGE_MIN_SHARE = 0.8
+# A two-axis joint's first axis (elbow, ankle flexion) is at least this far from the
+# parent segment's long axis (anatomically ~90 deg).
+MIN_FIRST_FROM_LONG_DEG = 60.0
+# Alternations of the two-axis fit (each a pair of 3x3 eigenproblems; settled by ~10).
+SECOND_AXIS_ITERATIONS = 30
 # Moving-average length [s] for the angular rate before the principal axis (twice: a
 # triangular window of 2 x 0.1 s, first zero near 10 Hz; gait is below 5 Hz).
 SMOOTH_S = 0.1
@@ -82,6 +105,143 @@ def dominant_axis(
     cov = r.T @ r
     vals, vecs = np.linalg.eigh(cov)
     return vecs[:, -1], float(vals[-1] / max(vals.sum(), 1e-300)), len(r)
+
+
+@dataclass(frozen=True)
+class HingeAxes:
+    """A joint's dominant relative rotation axis, seen from both sensors."""
+
+    in_parent: FloatArray  # (3,) in the parent sensor's frame
+    in_child: FloatArray  # (3,) in the child sensor's frame (mean direction)
+    share_parent: float  # share of the relative rotation energy about the axis
+    share_child: float  # the same times how steady the axis is in the child's frame
+
+
+def hinge_axes(
+    q_parent: FloatArray,
+    q_child: FloatArray,
+    rate_p: FloatArray,
+    rate_c: FloatArray,
+    use: np.ndarray,
+    smooth: int,
+    second_axis: FloatArray | None = None,
+) -> HingeAxes:
+    """A hinge's axis in both sensors' frames from their relative motion.
+
+    ``q_parent``, ``q_child`` (N, 4) ``q_world_sensor`` in one world (9D, or 6D after
+    :mod:`mocapkit.body.joint_headings`) on one clock; ``rate_p``, ``rate_c`` (N, 3) their
+    angular rates in their own frames; ``use`` (N,) the samples to use. The child's rate
+    relative to the parent, ``R_p^T (w_c - w_p)`` in the world, is about one axis fixed in
+    the parent (and, seen from the child, one fixed in the child) when the joint is a
+    hinge. ``second_axis``: the joint has a second axis, fixed in the child, and this is
+    the parent's long axis (3,) in its sensor's frame (gravity in the held pose): the
+    axis in the parent's frame is then refined, kept well away from the long axis. The
+    axes' sign is arbitrary (the same for both).
+
+    (Searching the relative heading of two unrelated 6D worlds for the most hinge-like
+    motion was tried and dropped: on the x-IMU3 recording it turned a knee by 86 deg.)"""
+    rp = quat_to_matrix(q_parent[use])
+    rc = quat_to_matrix(q_child[use])
+    wp = _central(np.einsum("nij,nj->ni", quat_to_matrix(q_parent), rate_p))[use]  # world
+    wc = _central(np.einsum("nij,nj->ni", quat_to_matrix(q_child), rate_c))[use]
+    w = np.einsum("nji,nj->ni", rp, wc - wp)  # relative rate in the parent's frame
+    axis_p, energy, _ = dominant_axis(w, smooth=smooth)
+    if not np.isfinite(axis_p).all():
+        return HingeAxes(axis_p, axis_p, 0.0, 0.0)
+    # the same axis seen from the child, averaged (a hinge keeps it fixed; its spread
+    # lowers the child's share)
+    mean_c = np.einsum("nji,nj->ni", rc, np.einsum("nij,j->ni", rp, axis_p)).mean(axis=0)
+    steady = float(np.linalg.norm(mean_c))
+    hinge = HingeAxes(axis_p, mean_c / max(steady, 1e-12), energy, energy * steady)
+    if second_axis is None:
+        return hinge
+    r_rel = np.einsum("nji,njk->nik", rp, rc)  # child -> parent frame
+    fit = _first_of_two_axes(w, r_rel, smooth, second_axis)
+    if fit is None:
+        return hinge
+    j1 = fit if float(fit @ axis_p) >= 0.0 else -fit
+    return replace(hinge, in_parent=j1)
+
+
+def _central(rate_world: FloatArray) -> FloatArray:
+    """Backward-difference world rates (the mean over each step, whichever end's
+    orientation expresses them) -> rates at the samples (mean of the steps either side):
+    in step with the orientations they are paired with."""
+    out = rate_world.copy()
+    out[:-1] = 0.5 * (rate_world[:-1] + rate_world[1:])
+    return out
+
+
+def _first_of_two_axes(
+    w: FloatArray, r_rel: FloatArray, smooth: int, long_axis: FloatArray
+) -> FloatArray | None:
+    """The first axis of a joint with a second axis fixed in the child (the forearm's
+    pronation after the elbow's flexion, the subtalar joint after the ankle).
+
+    The relative rate ``w`` (parent frame) lies in span{j1, R_rel j2} (``j1`` fixed in the
+    parent, ``j2`` in the child), so ``j1 . (R_rel j2 x w) = 0`` and ``j2 . (w_c x R_rel^T
+    j1) = 0``; solved alternately, each a small generalised eigenproblem, from each of the
+    relative rate's three principal axes (the second axis may move more than the first:
+    a forearm turning from the held pose into the walk), keeping the one the two axes
+    explain best. The
+    dominant axis alone is pulled towards the second axis by as much as the two move
+    together. With the elbow straight, a turn about the upper arm's long axis and a
+    flexion fixed in the forearm fit as well as the anatomy: solutions whose first axis
+    lies within ``MIN_FIRST_FROM_LONG_DEG`` of the parent's ``long_axis`` are not taken.
+    None without enough motion, or when every start degenerates (nearly a pure hinge:
+    ``j2 ~ R_rel^T j1``) or lies along the long axis."""
+    # the fit itself on the rates as they are (smoothing them would no longer pair them
+    # with the orientations); the smoothed ones pick the samples with motion
+    speed = np.linalg.norm(np.nan_to_num(w), axis=1)
+    if smooth > 1:
+        speed = uniform_filter1d(uniform_filter1d(speed, smooth, mode="nearest"), smooth,
+                                 mode="nearest")  # fmt: skip
+    fast = np.isfinite(w).all(axis=1) & (speed > 0.5)
+    if fast.sum() < 50:
+        return None
+    w, r_rel = w[fast], r_rel[fast]
+    w_c = np.einsum("nji,nj->ni", r_rel, w)
+    energy = float(np.sum(w * w))
+    best: tuple[FloatArray, float] | None = None
+    for start in np.linalg.eigh(w.T @ w)[1].T:
+        j1 = start
+        u = np.einsum("nji,j->ni", r_rel, j1)
+        j2 = dominant_axis(w_c - np.sum(w_c * u, axis=1, keepdims=True) * u, min_rate=0.0)[0]
+        if not np.isfinite(j2).all():
+            continue
+        for _ in range(SECOND_AXIS_ITERATIONS):
+            j1 = _plane_normal_fit(np.einsum("nij,j->ni", r_rel, j2), w, smooth)
+            j2 = _plane_normal_fit(np.einsum("nji,j->ni", r_rel, j1), w_c, smooth)
+        v = np.einsum("nij,j->ni", r_rel, j2)
+        normal = np.cross(j1, v)
+        size = np.linalg.norm(normal, axis=1)
+        if float(np.mean(size)) < 0.3:
+            continue  # degenerate: the second axis slid onto the first
+        if abs(float(j1 @ long_axis)) > np.cos(np.radians(MIN_FIRST_FROM_LONG_DEG)):
+            continue
+        off = np.einsum("ni,ni->n", normal / np.maximum(size, 1e-9)[:, None], w)
+        explained = 1.0 - float(np.sum(off * off)) / max(energy, 1e-300)
+        if best is None or explained > best[1]:
+            best = (j1, explained)
+    return None if best is None else best[0]
+
+
+def _plane_normal_fit(v: FloatArray, w: FloatArray, smooth: int = 1) -> FloatArray:
+    """(3,) unit ``j`` such that each ``w[n]`` lies in the plane of ``j`` and ``v[n]``:
+    minimises sum ((j x v) . w)^2 / sum |j x v|^2 (a generalised eigenproblem; the
+    denominator keeps ``j`` from sliding onto the ``v`` that would make every plane
+    vanish). The constraints ``j . (v x w) = 0`` are averaged over ``smooth`` samples
+    (twice) first: an average of exact constraints is exact, and the rates' noise
+    averages out."""
+    a = np.cross(v, w)
+    if smooth > 1:
+        a = uniform_filter1d(uniform_filter1d(a, smooth, axis=0, mode="nearest"), smooth,
+                             axis=0, mode="nearest")  # fmt: skip
+    num = a.T @ a
+    den = v.shape[0] * np.eye(3) - v.T @ v  # sum (|v|^2 I - v v^T) for unit v
+    vecs = eigh(num, den)[1]
+    j = vecs[:, 0]
+    return j / np.linalg.norm(j)
 
 
 def horizontal_rate(series: OrientationSeries) -> FloatArray:
@@ -157,11 +317,15 @@ def calibrate_functional(
             calibrated sensor's world about z so its segment faces the body heading at
             calibration (6D filters whose headings differ, by up to +-90 deg from the
             consensus: a larger offset cannot be told from a mounting turned round; with
-            known mountings use :func:`mocapkit.body.calibration.reset_headings`).
+            known mountings use :func:`mocapkit.body.calibration.reset_headings`);
+            ``"joints"``: as ``"pose"``, for 6D orientations whose headings were kept
+            consistent through the joints first (:mod:`mocapkit.body.joint_headings`),
+            so that knees, elbows and ankles can be compared across the joint (hinge
+            axes, below), as with ``"shared"``.
     """
-    if heading_alignment not in ("shared", "pose"):
+    if heading_alignment not in ("shared", "pose", "joints"):
         raise ConfigError(
-            f"heading_alignment: expected 'shared' or 'pose', got {heading_alignment!r}"
+            f"heading_alignment: expected 'shared', 'pose' or 'joints', got {heading_alignment!r}"
         )
     tree.check_sensors(list(orientations))
     coords = pose_coordinates(tree, pose)
@@ -178,26 +342,33 @@ def calibrate_functional(
         diag[seg.name] = d
         if seg.functional != "flexion":
             continue
-        rate = horizontal_rate(s)
-        if motion_window is None:
-            use = np.ones(s.n_samples, dtype=bool)
-            use[idx] = False
-        else:
-            use = np.zeros(s.n_samples, dtype=bool)
-            use[window_indices(s.time, motion_window)] = True
+        use = _motion_mask(s, idx, motion_window)
         smooth = max(1, round(SMOOTH_S / float(np.median(np.diff(s.time)))))
-        axis, share, n_used = dominant_axis(rate[use], smooth=smooth)
-        up_sensor = quat_rotate(quat_conj(q_cal[seg.sensor]), e_z)
+        axis, share, n_used = dominant_axis(horizontal_rate(s)[use], smooth=smooth)
         d["functional_share"] = share
         d["functional_samples"] = float(n_used)
-        if not np.isfinite(axis).all():
+        options = [(axis, flexion_axis_in_segment(tree, q_ground_seg, i), share, 0.0)]
+        # the sensors' worlds must agree to compare them across a joint
+        hinge = None
+        if heading_alignment != "pose":
+            hinge = _best_hinge(tree, orientations, i, q_ground_seg, use, smooth, q_cal)
+        if hinge is not None:  # a hinge's axis is fixed in the segment: preferred
+            options.insert(0, (*hinge, 1.0))
+        up_sensor = quat_rotate(quat_conj(q_cal[seg.sensor]), e_z)
+        usable = None
+        for axis, lat_seg, share, is_hinge in options:
+            if not np.isfinite(axis).all():
+                continue
+            from_up = float(np.rad2deg(np.arccos(min(1.0, abs(float(axis @ up_sensor))))))
+            d.update(functional_share=share, functional_axis_from_up_deg=from_up,
+                     hinge=is_hinge)  # fmt: skip
+            if share >= MIN_SHARE and from_up >= MIN_AXIS_FROM_UP_DEG:
+                usable = axis, lat_seg
+                break
+        if usable is None:
             continue
-        from_up = float(np.rad2deg(np.arccos(min(1.0, abs(float(axis @ up_sensor))))))
-        d["functional_axis_from_up_deg"] = from_up
-        if share < MIN_SHARE or from_up < MIN_AXIS_FROM_UP_DEG:
-            continue
+        axis, lat_seg = usable
         up_seg = quat_rotate(quat_conj(q_ground_seg[i]), e_y)
-        lat_seg = flexion_axis_in_segment(tree, q_ground_seg, i)
         mount = mounting_from_two_axes(up_sensor, axis, up_seg, lat_seg)
         fwd = quat_rotate(
             q_cal[seg.sensor], quat_rotate(mount, quat_rotate(quat_conj(q_ground_seg[i]), e_x))
@@ -243,7 +414,7 @@ def calibrate_functional(
                     off = _wrap(off - np.pi)
                 d["heading_offset_deg"] = float(np.rad2deg(off))
                 d["functional"] = 1.0
-                if heading_alignment == "pose":
+                if heading_alignment in ("pose", "joints"):
                     q_heading = yaw_quat(-off)
             else:
                 target = quat_mul(q_wg, q_ground_seg[i])
@@ -267,6 +438,73 @@ def calibrate_functional(
     if len(psis) == 1:
         return build(psis[0])
     return _choose_forward(tree, orientations, [build(p) for p in psis])
+
+
+def _motion_mask(
+    s: OrientationSeries, still_idx: np.ndarray, motion_window: tuple[float, float] | None
+) -> np.ndarray:
+    """(N,) samples of motion: the window given, else everything outside the still one."""
+    if motion_window is None:
+        use = np.ones(s.n_samples, dtype=bool)
+        use[still_idx] = False
+    else:
+        use = np.zeros(s.n_samples, dtype=bool)
+        use[window_indices(s.time, motion_window)] = True
+    return use
+
+
+def _best_hinge(
+    tree: SensorTree,
+    orientations: Mapping[str, OrientationSeries],
+    i: int,
+    q_ground_seg: FloatArray,
+    use: np.ndarray,
+    smooth: int,
+    q_still: Mapping[str, FloatArray],
+) -> tuple[FloatArray, FloatArray, float] | None:
+    """Segment i's flexion axis from the hinges it takes part in (its own joint seen from
+    its side, its children's joints seen from its side): (axis in its sensor's frame, the
+    same axis in the segment's frame, share), the most hinge-like one with a share of at
+    least ``HINGE_MIN_SHARE``; None when none is (a ball joint, too little motion, sensors
+    on different clocks)."""
+    seg = tree.segments[i]
+    me = orientations[seg.sensor]
+    rate_me = angular_rate(me)
+    options: list[tuple[int, FloatArray, FloatArray, float]] = []
+    parents = tree.parent_index
+    pairs = [(int(parents[i]), i)] if parents[i] >= 0 else []
+    pairs += [(i, j) for j in range(len(tree.segments)) if parents[j] == i]
+    # a ball joint (three coordinates: hip, shoulder, spine) has no fixed axis, however
+    # much of a walk's motion is about one
+    pairs = [(p, c) for p, c in pairs if _degrees_of_freedom(tree, c) < 3]
+    for p, c in pairs:
+        other = orientations[tree.segments[c if p == i else p].sensor]
+        if other.n_samples != me.n_samples or not np.array_equal(other.time, me.time):
+            continue
+        rate_other = angular_rate(other)
+        qp, qc = (me.quat, other.quat) if p == i else (other.quat, me.quat)
+        rp, rc = (rate_me, rate_other) if p == i else (rate_other, rate_me)
+        ok = use & np.isfinite(qp).all(axis=1) & np.isfinite(qc).all(axis=1)
+        dof = _degrees_of_freedom(tree, c)
+        up_p = quat_rotate(quat_conj(q_still[tree.segments[p].sensor]), np.array([0.0, 0.0, 1.0]))
+        h = hinge_axes(qp, qc, rp, rc, ok, smooth, second_axis=up_p if dof == 2 else None)
+        if p == i:  # the child's joint axis, in this (its parent) segment's frame
+            options.append((dof, h.in_parent, tree.segments[c].joint.frame[:, 0],
+                            h.share_parent))  # fmt: skip
+        else:
+            options.append((dof, h.in_child, flexion_axis_in_segment(tree, q_ground_seg, i),
+                            h.share_child))  # fmt: skip
+    good = [o for o in options if o[3] >= HINGE_MIN_SHARE and np.isfinite(o[1]).all()]
+    if not good:
+        return None
+    # a one-axis joint (a knee) before a two-axis one (an ankle), then the clearer
+    dof, axis, in_segment, share = min(good, key=lambda o: (o[0], -o[3]))
+    return axis, in_segment, share
+
+
+def _degrees_of_freedom(tree: SensorTree, i: int) -> int:
+    """How many coordinates segment i's joint reports."""
+    return sum(c is not None for c in tree.segments[i].joint.coordinates)
 
 
 def yaw_segment(q_ground_segment: FloatArray) -> FloatArray:

@@ -18,6 +18,7 @@ from mocapkit.body.calibration import (
     calibrate_pose,
     find_still_window,
 )
+from mocapkit.body.calibration_checks import CalibrationFinding, warn_calibration
 from mocapkit.body.functional import calibrate_functional
 from mocapkit.body.joint_angles import BodyAngles
 from mocapkit.body.kinematics import body_angles
@@ -36,6 +37,7 @@ class BodyResult:
     body: BodyAngles
     segments: dict[str, OrientationSeries]
     implausible: tuple[Finding, ...] = ()
+    calibration_findings: tuple[CalibrationFinding, ...] = ()
 
 
 def crop(
@@ -119,6 +121,7 @@ def run_body(
     tree.check_sensors(list(orientations))
     use = {s.sensor: orientations[s.sensor] for s in tree.segments}
     use = align_orientations(crop(use, start, stop))
+    checks: list[CalibrationFinding] = []
     if isinstance(calibration, BodyCalibration):
         cal = calibration
     else:
@@ -130,11 +133,12 @@ def run_body(
                 t0 = float(source[tree.segments[0].sensor].time[0])
                 window = (t0, t0)
         cal = calibrate(tree, source, calibration=calibration, window=window, **calibrate_kwargs)
+        checks = warn_calibration(tree, cal)  # a calibration at odds with itself, named
     body, segments = body_angles(
         tree, cal, use, dropout=dropout, max_hold_s=max_hold_s, backend=backend
     )
     findings = warn_implausible(tree, body.angles)  # never written silently
-    return BodyResult(cal, body, segments, tuple(findings))
+    return BodyResult(cal, body, segments, tuple(findings), tuple(checks))
 
 
 def summary(result: BodyResult) -> dict[str, Any]:
@@ -171,6 +175,16 @@ def summary(result: BodyResult) -> dict[str, Any]:
         "near_gimbal": dict(result.body.near_gimbal),
         "held": dict(result.body.held),
         "coordinates": coords,
+        "calibration_checks": [
+            {
+                "kind": f.kind,
+                "segment": f.segment,
+                "sensor": f.sensor,
+                "value_deg": round(f.value_deg, 1),
+                "message": f.message,
+            }
+            for f in result.calibration_findings
+        ],
         "implausible": [
             {
                 "coordinate": f.coordinate,

@@ -31,7 +31,9 @@ RANGES_DEG: dict[str, tuple[float, float]] = {
     "neck_extension": (-90.0, 90.0),
     "neck_bending": (-60.0, 60.0),
     "neck_rotation": (-90.0, 90.0),
-    "pro_sup": (-150.0, 150.0),  # a forearm sensor also sees the ulna's share of the twist
+    # 90 is neutral (the N-pose: palms to the thighs), 0 supinated (palms forward), 180
+    # pronated; a forearm sensor also sees the ulna's share of the twist
+    "pro_sup": (-60.0, 210.0),
     "wrist_flex": (-90.0, 90.0),
     "wrist_dev": (-50.0, 50.0),
     "hip_flexion": (-40.0, 140.0),

@@ -97,11 +97,15 @@ def _cmd_angles(args: argparse.Namespace) -> int:
         calibration = BodyCalibration.from_dict(json.loads(Path(args.calibration_in).read_text()))
     else:
         alignment = args.heading_alignment
-        if alignment is None:  # 6D filters give each sensor its own heading
+        if alignment is None:
+            # 6D: each sensor has its own heading, kept consistent by the joints. 9D and a
+            # device's orientations: one shared heading (joints would also take out the
+            # few degrees between 9D sensors in the closed loop, but on the x-IMU3
+            # recording they move the hips 14 deg from what two 9D filters agree on)
             alignment = "joints" if (args.filter and args.mode == "6d") else "shared"
         if alignment == "joints":
+            # aligned at the held pose, kept aligned by the joints
             orientations, joint_info = _joint_headings(tree, orientations, raw)
-            alignment = "pose"  # aligned at the held pose, kept aligned by the joints
         kwargs = {
             "heading": heading,
             "heading_alignment": alignment,
