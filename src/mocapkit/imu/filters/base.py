@@ -106,7 +106,8 @@ class FilterParams:
             ``max_integrated_gap_s``) is a time gap (missing samples, a clock jump): held
             over one nominal step and warned about, never integrated; ``polaris``
             re-acquires its orientation after it. Shorter steps (a few dropped packets)
-            are integrated over their true length.
+            are integrated over their true length, at the mean of the readings either
+            side (the trapezoidal rule).
         max_integrated_gap_s: lost packets up to this long [s] are integrated with the
             next reading rather than held (a limb's rate hardly changes in a quarter of a
             second; holding loses the rotation, for good without a magnetometer).
