@@ -32,12 +32,12 @@ print(json.dumps({"seconds": time.perf_counter() - t0,
 """
 
 
-def make_recording(path: Path, minutes: float) -> None:
+def make_recording(path: Path, minutes: float, rate: float = 100.0) -> None:
     from mocapkit.io.imu_csv import write_imu_csv
     from mocapkit.series import ImuRecording
 
-    n = round(minutes * 60 * 100)
-    t = np.arange(n) / 100.0
+    n = round(minutes * 60 * rate)
+    t = np.arange(n) / rate
     rng = np.random.default_rng(0)
     gyr = np.column_stack([np.sin(0.7 * t), np.sin(1.1 * t), np.sin(0.3 * t)])
     gyr = gyr + 0.01 * rng.normal(size=(n, 3))
@@ -56,6 +56,7 @@ def measure(argv: list[str]) -> dict[str, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, nargs="+", default=[1.0, 10.0, 60.0])
+    parser.add_argument("--rate", type=float, default=100.0, help="sampling rate [Hz]")
     parser.add_argument("--write-docs", action="store_true")
     args = parser.parse_args()
     exe = [sys.executable, "-c", "from mocapkit.cli.main import run; run()"]
@@ -63,7 +64,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as d:
         for minutes in args.minutes:
             src = Path(d) / f"rec_{minutes:g}min.csv"
-            make_recording(src, minutes)
+            make_recording(src, minutes, args.rate)
             for offline in (False, True):
                 out = str(Path(d) / "out.sto")
                 argv = [*exe, "imu", "run", str(src), "--filter", "polaris", "-o", out]
@@ -77,14 +78,19 @@ def main() -> None:
     first = {mode: m["peak_mb"] for mn, mode, m in rows if mn == args.minutes[0]}
     last = {mode: m["peak_mb"] for mn, mode, m in rows if mn == args.minutes[-1]}
     growth = ", ".join(f"{mode} x{last[mode] / first[mode]:.1f}" for mode in first)
+    rate_arg = f" --rate {args.rate:g}" if args.rate != 100 else ""
     text = (
-        "`python -m benchmarks.memory_vs_length` (one sensor at 100 Hz, a mocapkit CSV, "
-        "`mocapkit imu run --filter polaris`, whole processes). Peak memory from the "
-        f"shortest to the longest recording: {growth} (target: within x2).\n\n" + "\n".join(lines)
+        f"`python -m benchmarks.memory_vs_length{rate_arg}"
+        f" --minutes {' '.join(f'{m:g}' for m in args.minutes)}` (one sensor at "
+        f"{args.rate:g} Hz, a mocapkit CSV, `mocapkit imu run --filter polaris`, whole "
+        "processes; online streams the CSV in pieces of 100,000 rows, offline reads it "
+        "whole). Peak memory from the shortest to the longest recording: "
+        f"{growth} (target: within x2).\n\n" + "\n".join(lines)
     )
     print(text)
     if args.write_docs:
-        write_section("Memory and time against recording length", text)
+        heading = "Memory and time against recording length"
+        write_section(heading + (f", {args.rate:g} Hz" if args.rate != 100 else ""), text)
 
 
 if __name__ == "__main__":

@@ -265,6 +265,8 @@ def _run(args: argparse.Namespace) -> int:
             f"-o {args.output}: the output format follows the extension: .sto or .mot "
             "(OpenSense quaternion table) or .csv"
         )
+    if _streams(args):
+        return _run_streamed(args)
     series: dict[str, OrientationSeries] = {}
     if args.filter_name == DEVICE:
         series = _select(read_device_orientations(args.path), args.sensor, args.path)
@@ -311,6 +313,41 @@ def _run(args: argparse.Namespace) -> int:
         print_json(
             {"output": str(args.output), "rows": len(time), "sensors": labels,
              "filter": args.filter_name, "mode": args.mode, "offline": args.offline}
+        )  # fmt: skip
+    return EXIT_OK
+
+
+def _streams(args: argparse.Namespace) -> bool:
+    """One mocapkit IMU CSV run online: read, filtered and written piece by piece."""
+    path = Path(args.path)
+    return (
+        path.is_file()
+        and path.suffix.lower() == ".csv"
+        and args.filter_name != DEVICE
+        and not args.offline
+        and not args.remove_gyr_bias
+        and not args.sensor
+    )
+
+
+def _run_streamed(args: argparse.Namespace) -> int:
+    from mocapkit.imu.streaming import run_csv_streaming
+
+    rep = run_csv_streaming(Path(args.path), args.filter_name, args.output, mode=args.mode,
+                            params=dict(args.param))  # fmt: skip
+    if rep.mag_gaps or rep.acc_rejected or rep.mag_rejected:
+        print(
+            f"{rep.sensor}: {rep.mag_gaps} magnetometer gaps and {rep.mag_rejected} rejected "
+            f"samples processed as 6D, {rep.acc_rejected} accelerometer samples rejected",
+            file=sys.stderr,
+        )
+    label = "_".join(rep.sensor.split())
+    print(f"wrote {args.output} ({rep.rows} rows, sensors: {label})", file=sys.stderr)
+    if args.json:
+        print_json(
+            {"output": str(args.output), "rows": rep.rows, "sensors": [label],
+             "filter": args.filter_name, "mode": args.mode, "offline": False,
+             "streamed": True, "chunks": rep.chunks}
         )  # fmt: skip
     return EXIT_OK
 
