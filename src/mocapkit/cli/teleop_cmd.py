@@ -141,6 +141,31 @@ def register(sub: Any) -> None:
         "comma-separated endpoints (a ROS machine's rmw_zenohd, e.g. tcp/127.0.0.1:7447; "
         "'' for Zenoh's scouting)",
     )
+    rn.add_argument(
+        "--robot-link",
+        choices=("server", "ros2"),
+        default="server",
+        help="server: mocapkit's robot server (UDP; default); ros2: a ROS 2 robot over the "
+        "--ros2-zenoh endpoints, joint targets to --ros2-command-topic and its joint states "
+        "from --ros2-state-topic (humanoids: --robot g1, talos, ...)",
+    )
+    rn.add_argument(
+        "--ros2-command-topic",
+        default="/forward_position_controller/commands",
+        help="with --robot-link ros2: std_msgs/Float64MultiArray targets (ros2_control's "
+        "forward command controller)",
+    )
+    rn.add_argument(
+        "--ros2-state-topic",
+        default="/joint_states",
+        help="with --robot-link ros2: the robot's sensor_msgs/JointState",
+    )
+    rn.add_argument(
+        "--ros2-joints",
+        default=None,
+        help="with --robot-link ros2: the controller's joints in its order, comma-separated "
+        "(default: the robot model's)",
+    )
     rn.add_argument("--calibrate-seconds", type=float, default=1.0, help="calibration hold")
     rn.add_argument(
         "--robot-key-file",
@@ -243,7 +268,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from mocapkit.teleop.live import LiveConfig
-    from mocapkit.teleop.run import RunOptions, parse_commands, run_live
+    from mocapkit.teleop.run import Ros2RobotOptions, RunOptions, parse_commands, run_live
     from mocapkit.teleop.server import ServerConfig, read_key
 
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(name)s: %(message)s")
@@ -267,6 +292,15 @@ def _run(args: argparse.Namespace) -> int:
         ros2_zenoh=None
         if args.ros2_zenoh is None
         else tuple(e for e in args.ros2_zenoh.split(",") if e),
+        ros2_robot=None
+        if args.robot_link != "ros2"
+        else Ros2RobotOptions(
+            command_topic=args.ros2_command_topic,
+            state_topic=args.ros2_state_topic,
+            controller_joints=None
+            if args.ros2_joints is None
+            else tuple(j.strip() for j in args.ros2_joints.split(",") if j.strip()),
+        ),
     )
     summary = run_live(config, options)
     if args.json:

@@ -70,6 +70,7 @@ class Ros2ZenohPublisher:
             conf.insert_json5("connect/endpoints", str(list(connect)).replace("'", '"'))
         self.session = zenoh.open(conf)
         self._pubs: dict[str, Any] = {}
+        self._subs: list[Any] = []
         self._seq: dict[str, int] = {}
         self.gid = list(os.urandom(16))
         self.published = 0
@@ -110,7 +111,37 @@ class Ros2ZenohPublisher:
         )  # fmt: skip
         return self.publish(topic, "sensor_msgs/msg/JointState", msg)
 
+    def float64_array(self, topic: str, values: Sequence[float]) -> str:
+        """A ``std_msgs/Float64MultiArray`` (no layout): what ros2_control's forward command
+        controllers take on ``/<controller>/commands``."""
+        T = self.types.types
+        layout = T["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0)
+        msg = T["std_msgs/msg/Float64MultiArray"](
+            layout=layout, data=np.asarray(values, dtype=np.float64)
+        )
+        return self.publish(topic, "std_msgs/msg/Float64MultiArray", msg)
+
+    def subscribe(self, topic: str, type_name: str, callback: Any) -> Any:
+        """Call ``callback(msg)`` with every message of ``type_name`` on ``topic`` (any
+        type hash: a peer on another ROS distribution still matches); a payload that does
+        not decode calls ``callback(None)``. Runs on Zenoh's thread: keep it short."""
+        pkg, kind, name = type_name.split("/")
+        key = f"{self.domain_id}/{topic.strip('/')}/{pkg}::{kind}::dds_::{name}_/*"
+
+        def on_sample(sample: Any) -> None:
+            try:
+                msg = self.types.deserialize_cdr(bytes(sample.payload.to_bytes()), type_name)
+            except Exception:  # garbage from the network must not reach the session
+                msg = None
+            callback(msg)
+
+        sub = self.session.declare_subscriber(key, on_sample)
+        self._subs.append(sub)
+        return sub
+
     def close(self) -> None:
+        for sub in self._subs:
+            sub.undeclare()
         for pub in self._pubs.values():
             pub.undeclare()
         self.session.close()

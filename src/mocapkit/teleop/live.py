@@ -117,22 +117,34 @@ class LiveSession:
         robot_address: the robot server's ``(host, port)``.
         record: an MCAP file to record the session to (None: no recording).
         keep_frames: keep every processed frame and robot report in memory (evaluation).
+        make_link: builds another robot link from the robot model's joint names instead
+            of the UDP client of ``robot_address`` (:class:`~mocapkit.teleop.ros2_link.
+            Ros2RobotLink`).
     """
 
     def __init__(
         self,
         config: LiveConfig,
-        robot_address: tuple[str, int],
+        robot_address: tuple[str, int] | None,
         record: str | Path | None = None,
         keep_frames: bool = False,
+        make_link: Callable[[tuple[str, ...]], Any] | None = None,
     ) -> None:
         self.config = config
         humanoid = config.pipeline.robot not in available_robots()
         self.session = (
             HumanoidSession(config.session) if humanoid else TeleopSession(config.session)
         )
-        self.link = RobotLink(robot_address, on_report=self._on_report, key=config.robot_key)
-        self.pipeline = TeleopPipeline(config.pipeline, self.session, self.link)
+        self.pipeline = TeleopPipeline(config.pipeline, self.session, None)
+        if make_link is not None:  # another robot link (ROS 2): given the robot's joints
+            self.link = make_link(self.pipeline.robot_joint_names)
+            self.link.on_report = self._on_report
+        elif robot_address is None:
+            raise ConfigError("live session: give the robot server's address or a link")
+        else:
+            self.link = RobotLink(robot_address, on_report=self._on_report,
+                                  key=config.robot_key)  # fmt: skip
+        self.pipeline.link = self.link
         self.pipeline.keep_frames = keep_frames
         self.pipeline.on_frame = self._on_frame
         self.keep_frames = keep_frames

@@ -28,6 +28,16 @@ log = logging.getLogger("mocapkit.teleop.run")
 
 
 @dataclass(frozen=True)
+class Ros2RobotOptions:
+    """The robot is a ROS 2 machine's (:mod:`mocapkit.teleop.ros2_link`), over the
+    ``ros2_zenoh`` endpoints: targets to ``command_topic``, its ``state_topic`` back."""
+
+    command_topic: str = "/forward_position_controller/commands"
+    state_topic: str = "/joint_states"
+    controller_joints: tuple[str, ...] | None = None
+
+
+@dataclass(frozen=True)
 class RunOptions:
     """How a live run is set up.
 
@@ -45,6 +55,8 @@ class RunOptions:
             (:mod:`mocapkit.io.lsl`).
         ros2_zenoh: Zenoh endpoints of a ROS 2 (rmw_zenoh) router to publish the joint
             states to (:mod:`mocapkit.io.ros2_zenoh`; empty: Zenoh's scouting), or None.
+        ros2_robot: drive a ROS 2 robot over those endpoints instead of mocapkit's robot
+            server (no server is started), or None.
     """
 
     server: tuple[str, int] | None = None
@@ -57,6 +69,7 @@ class RunOptions:
     foxglove_port: int | None = None
     lsl: bool = False
     ros2_zenoh: tuple[str, ...] | None = None
+    ros2_robot: Ros2RobotOptions | None = None
 
 
 def parse_commands(text: str) -> tuple[tuple[float, str], ...]:
@@ -78,7 +91,10 @@ def parse_commands(text: str) -> tuple[tuple[float, str], ...]:
 
 
 @contextlib.contextmanager
-def _robot(options: RunOptions, config: LiveConfig) -> Iterator[tuple[str, int]]:
+def _robot(options: RunOptions, config: LiveConfig) -> Iterator[tuple[str, int] | None]:
+    if options.ros2_robot is not None:  # the robot is a ROS 2 machine's, reached over Zenoh
+        yield None
+        return
     if options.server is not None:
         yield options.server
         return
@@ -96,7 +112,22 @@ def run_live(
     """Run a live session (see the module docstring); returns the final summary:
     the snapshot plus ``pipeline_ms_p50/p99`` over the whole run and every transition."""
     done = threading.Event()
-    with _robot(options, config) as address, LiveSession(config, address, options.record) as live:
+    make_link = None
+    if options.ros2_robot is not None:
+        from mocapkit.teleop.ros2_link import Ros2RobotLink
+
+        ros = options.ros2_robot
+        endpoints = options.ros2_zenoh or ()
+
+        def make_link(joints: tuple[str, ...]) -> Any:
+            return Ros2RobotLink(joints, endpoints, command_topic=ros.command_topic,
+                                 state_topic=ros.state_topic,
+                                 controller_joints=ros.controller_joints)  # fmt: skip
+
+    with (
+        _robot(options, config) as address,
+        LiveSession(config, address, options.record, make_link=make_link) as live,
+    ):
         controls = Controls(live, done.set)
         log.info("suit stream expected on UDP port %d", live.suit_port)
         with contextlib.ExitStack() as stack:

@@ -1,0 +1,183 @@
+"""The robot link to a ROS 2 robot: joint targets to a ros2_control controller, the
+robot's ``/joint_states`` back, over Zenoh in rmw_zenoh's format (no ROS install;
+:mod:`mocapkit.io.ros2_zenoh`).
+
+:class:`Ros2RobotLink` stands where :class:`~mocapkit.teleop.link.RobotLink` (mocapkit's
+UDP robot server) stands in the live session, for robots driven joint by joint
+(humanoids, ``--robot g1``):
+
+- a command goes out as ``std_msgs/Float64MultiArray`` on ``command_topic`` (default
+  ``/forward_position_controller/commands``: ros2_control's forward command controller),
+  the positions in the controller's joint order (``controller_joints``, default the
+  robot model's). A floating base cannot be commanded through it and is left out.
+- the robot's ``sensor_msgs/JointState`` on ``state_topic`` (default ``/joint_states``)
+  become the session's reports: their positions picked out by name in the robot model's
+  joint order. A state that lacks one of them, or a payload that does not decode, is
+  counted (``malformed``) and dropped with a warning naming the joints.
+- a HOLD sends nothing: a forward controller keeps its last target.
+- the synchronisation the paper's robot enforced is the session's own here: the robot
+  reports itself ready (``Gate.SYNCED``) and :class:`~mocapkit.teleop.humanoid_session.
+  HumanoidSession` aligns from the reported joints at its limited rate before it follows.
+  A silent ``/joint_states`` (the robot gone) holds the session after its report timeout.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from mocapkit._validate import FloatArray
+from mocapkit.errors import ConfigError
+from mocapkit.teleop import protocol as proto
+
+log = logging.getLogger("mocapkit.teleop.ros2_link")
+
+COMMAND_TOPIC = "/forward_position_controller/commands"
+STATE_TOPIC = "/joint_states"
+
+
+class Ros2RobotLink:
+    """See the module docstring.
+
+    Args:
+        joint_names: the robot model's one-DOF joints, in the order the session's
+            commands and reports use.
+        connect: Zenoh endpoints (the ROS machine's ``rmw_zenohd``, ``tcp/HOST:7447``).
+        controller_joints: the controller's joint order (default ``joint_names``).
+        domain_id: ``ROS_DOMAIN_ID`` (default: the environment's, else 0).
+    """
+
+    def __init__(
+        self,
+        joint_names: Sequence[str],
+        connect: Sequence[str] = (),
+        *,
+        command_topic: str = COMMAND_TOPIC,
+        state_topic: str = STATE_TOPIC,
+        controller_joints: Sequence[str] | None = None,
+        on_report: Callable[[float, proto.Report], None] | None = None,
+        domain_id: int | None = None,
+    ) -> None:
+        from mocapkit.io.ros2_zenoh import Ros2ZenohPublisher
+
+        self.joint_names = list(joint_names)
+        order = list(controller_joints) if controller_joints is not None else self.joint_names
+        unknown = [j for j in order if j not in self.joint_names]
+        if unknown:
+            raise ConfigError(
+                f"controller joints {', '.join(unknown)} are not joints of the robot model "
+                f"(its joints: {', '.join(self.joint_names)})"
+            )
+        self._to_controller = np.array([self.joint_names.index(j) for j in order], dtype=int)
+        self.command_topic = command_topic
+        self.state_topic = state_topic
+        self.address = f"ROS 2 {command_topic} / {state_topic} over Zenoh"
+        self.on_report = on_report
+        self.seq = 0
+        self.latest: proto.Report | None = None
+        self.latest_t = -np.inf
+        self.malformed = 0
+        self.send_errors = 0
+        self._incoming: tuple[float, FloatArray] | None = None
+        self._lock = threading.Lock()
+        self._reports = 0
+        self._warned = False
+        self.pub = Ros2ZenohPublisher(connect=connect, domain_id=domain_id)
+        self.pub.subscribe(state_topic, "sensor_msgs/msg/JointState", self._on_state)
+
+    # -- from Zenoh's thread ----------------------------------------------------------------
+    def _on_state(self, msg: Any) -> None:
+        if msg is None:
+            self._malformed("a JointState that does not decode")
+            return
+        names = list(msg.name)
+        pos = np.asarray(msg.position, dtype=np.float64)
+        if len(pos) != len(names):
+            self._malformed(f"{len(names)} names but {len(pos)} positions")
+            return
+        where = {n: i for i, n in enumerate(names)}
+        missing = [j for j in self.joint_names if j not in where]
+        if missing:
+            self._malformed(f"no position for {', '.join(missing[:5])}")
+            return
+        q = pos[[where[j] for j in self.joint_names]]
+        with self._lock:
+            self._incoming = (time.monotonic(), q)
+
+    def _malformed(self, what: str) -> None:
+        self.malformed += 1
+        if not self._warned:  # once: a robot that names its joints otherwise says so 100x/s
+            self._warned = True
+            log.warning("%s: dropped a joint state: %s", self.state_topic, what)
+
+    # -- the RobotLink interface -------------------------------------------------------------
+    def send_joints(self, base_pos: Any, base_quat: Any, q: Any) -> int:
+        """Joint targets [rad] in the model's order to the controller (base left out)."""
+        self.seq += 1
+        values = np.asarray(q, dtype=np.float64)[self._to_controller]
+        try:
+            self.pub.float64_array(self.command_topic, values)
+        except Exception as exc:  # a Zenoh peer that disappears must not stop the session
+            self.send_errors += 1
+            log.debug("ROS 2 command failed: %s", exc)
+        return self.seq
+
+    def send_command(self, T_base_ee: Any) -> int:
+        raise ConfigError(
+            "the ROS 2 robot link takes joint targets: use a humanoid robot (--robot g1, "
+            "talos, ...) or mocapkit's robot server for end-effector poses"
+        )
+
+    def send_hold(self) -> None:
+        """Nothing to send: a forward controller keeps its last target."""
+
+    def poll(self) -> int:
+        with self._lock:
+            incoming, self._incoming = self._incoming, None
+        if incoming is None:
+            return 0
+        t, q = incoming
+        self._reports += 1
+        report = proto.Report(
+            seq=self._reports, t_send_ns=time.monotonic_ns(), pos=np.zeros(3),
+            quat=np.array([1.0, 0.0, 0.0, 0.0]), last_command_seq=self.seq,
+            gate=proto.Gate.SYNCED, reason=proto.Reason.OK, q=q,
+        )  # fmt: skip
+        self.latest, self.latest_t = report, t
+        if self.on_report is not None:
+            self.on_report(t, report)
+        return 1
+
+    def keepalive(self, now: float | None = None) -> bool:
+        return False  # the robot publishes its joint states whether we speak or not
+
+    def robot_pose(self) -> FloatArray | None:
+        return None
+
+    def report_age(self, now: float | None = None) -> float:
+        return (time.monotonic() if now is None else now) - self.latest_t
+
+    def wait_for_report(self, timeout_s: float = 5.0) -> bool:
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            if self.poll():
+                return True
+            time.sleep(0.005)
+        return False
+
+    def close(self) -> None:
+        self.pub.close()
+
+    def __enter__(self) -> Ros2RobotLink:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+__all__ = ["COMMAND_TOPIC", "STATE_TOPIC", "Ros2RobotLink"]
