@@ -73,3 +73,48 @@ def test_a_zenoh_subscriber_decodes_the_joint_states() -> None:
     seqs = [int(zext.z_deserialize(tuple[zext.Int64, zext.Int64, list[zext.UInt8]], a)[0])
             for _, _, a in got]  # fmt: skip
     assert np.all(np.diff(seqs) == 1)
+
+
+def _split_token(key: str) -> dict[str, str]:
+    """A graph token read back as rmw_zenoh's Entity::make reads it."""
+    parts = key.split("/")
+    names = ["admin", "domain", "zid", "nid", "id", "entity", "enclave", "namespace",
+             "node", "topic", "type", "hash", "qos"]  # fmt: skip
+    assert all(parts), key  # rmw_zenoh refuses empty parts
+    return dict(zip(names, parts, strict=False))
+
+
+def test_graph_tokens_as_rmw_zenoh_reads_them() -> None:
+    """A ROS 2 graph (ros2 node list, ros2 topic list) sees mocapkit's node, its
+    publisher and its subscription through liveliness tokens in rmw_zenoh's format."""
+    port = _free_port()
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", f'["tcp/127.0.0.1:{port}"]')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    with zenoh.open(conf) as graph:
+        with Ros2ZenohPublisher(connect=[f"tcp/127.0.0.1:{port}"], domain_id=7) as pub:
+            pub.joint_state("/mocapkit/joint_states", ["hip"], [0.1])
+            pub.subscribe("/joint_states", "sensor_msgs/msg/JointState", lambda m: None)
+            time.sleep(0.5)
+            keys = []
+            for reply in graph.liveliness().get("@ros2_lv/7/**", timeout=2.0):
+                keys.append(str(reply.ok.key_expr))
+        tokens = [_split_token(k) for k in keys]
+        node = [t for t in tokens if t["entity"] == "NN"]
+        assert len(node) == 1
+        assert (node[0]["namespace"], node[0]["node"], node[0]["enclave"]) == ("%", "mocapkit", "%")
+        by_kind = {t["entity"]: t for t in tokens if t["entity"] in ("MP", "MS")}
+        mp, ms = by_kind["MP"], by_kind["MS"]
+        assert mp["topic"] == "%mocapkit%joint_states"
+        assert mp["type"] == "sensor_msgs::msg::dds_::JointState_"
+        assert mp["hash"].startswith("RIHS01_")
+        assert mp["qos"] == "::,:,:,:,,"
+        assert ms["topic"] == "%joint_states"
+        assert mp["zid"] == ms["zid"] == node[0]["zid"]
+        assert mp["nid"] == ms["nid"] == node[0]["nid"]
+        assert len({node[0]["id"], mp["id"], ms["id"]}) == 3
+        # closing the publisher withdraws its tokens: the graph forgets the node
+        time.sleep(0.3)
+        left = list(graph.liveliness().get("@ros2_lv/7/**", timeout=1.0))
+        assert left == []

@@ -9,8 +9,18 @@ A ROS 2 machine running ``rmw_zenoh_cpp`` (the Zenoh router ``rmw_zenohd`` at
 e.g. ``0/mocapkit/joint_states/sensor_msgs::msg::dds_::JointState_/RIHS01_a13e...``, with
 rmw_zenoh's attachment (sequence number, source timestamp [ns], a 16-byte publisher
 GID). ``ros2 topic echo /mocapkit/joint_states sensor_msgs/msg/JointState`` prints it.
-The publisher declares no ROS graph token: ``ros2 topic list`` may not show it, while
-subscribers that name the topic and type receive it.
+
+The ROS graph: rmw_zenoh learns of nodes, publishers and subscriptions from Zenoh
+liveliness tokens (``ros2 node list``, ``ros2 topic list``). The publisher declares them
+as rmw_zenoh does (its ``liveliness_utils.cpp``, read at its 2024-10 state)::
+
+    @ros2_lv/<domain>/<zid>/<node id>/<entity id>/<NN|MP|MS>/<enclave>/<namespace>/<node>
+        [/<topic>/<type, DDS-mangled>/<type hash>/<QoS>]
+
+with ``/`` inside names written ``%`` (the root namespace and enclave are ``%``) and the
+default QoS as ``::,:,:,:,,`` (every policy at its default). The node is ``/mocapkit``.
+(The Zenoh id is written as Zenoh prints it; rmw_zenoh drops leading zeros per byte, which
+only matters for telling our own entities apart.)
 
 The live session (``mocapkit teleop run --ros2-zenoh tcp/127.0.0.1:7447``) publishes
 ``/mocapkit/joint_states`` (the body model's joint angles, ``sensor_msgs/JointState``) and
@@ -29,6 +39,9 @@ import numpy as np
 from mocapkit.errors import MissingDependencyError
 
 TYPESTORE = "ROS2_JAZZY"
+ADMIN_SPACE = "@ros2_lv"  # rmw_zenoh's liveliness tokens
+NODE_NAME = "mocapkit"
+DEFAULT_QOS = "::,:,:,:,,"  # rmw_zenoh's QoS key with every policy at its default
 
 
 def _deps() -> tuple[Any, Any, Any]:
@@ -71,14 +84,34 @@ class Ros2ZenohPublisher:
         self.session = zenoh.open(conf)
         self._pubs: dict[str, Any] = {}
         self._subs: list[Any] = []
+        self._tokens: list[Any] = []
+        self._zid = str(self.session.info.zid())
+        self._node = f"{self.domain_id}/{self._zid}/0"
+        self._entities = 0
+        self._token(f"{self._node}/0/NN/%/%/{NODE_NAME}")
         self._seq: dict[str, int] = {}
         self.gid = list(os.urandom(16))
         self.published = 0
 
+    def _token(self, rest: str) -> None:
+        self._tokens.append(self.session.liveliness().declare_token(f"{ADMIN_SPACE}/{rest}"))
+
+    def _entity_token(self, kind: str, topic: str, type_name: str, type_hash: str) -> None:
+        """A publisher's (``MP``) or subscription's (``MS``) graph token (module docstring)."""
+        self._entities += 1
+        pkg, sub, name = type_name.split("/")
+        mangled = "/" + topic.strip("/")
+        self._token(
+            f"{self._node}/{self._entities}/{kind}/%/%/{NODE_NAME}/{mangled.replace('/', '%')}"
+            f"/{pkg}::{sub}::dds_::{name}_/{type_hash}/{DEFAULT_QOS}"
+        )
+
     def _publisher(self, topic: str, type_name: str) -> Any:
-        key = key_expr(self.domain_id, topic, type_name, self.types.hash_rihs01(type_name))
+        type_hash = self.types.hash_rihs01(type_name)
+        key = key_expr(self.domain_id, topic, type_name, type_hash)
         if key not in self._pubs:
             self._pubs[key] = self.session.declare_publisher(key)
+            self._entity_token("MP", topic, type_name, type_hash)
             self._seq[key] = 0
         return key
 
@@ -137,9 +170,12 @@ class Ros2ZenohPublisher:
 
         sub = self.session.declare_subscriber(key, on_sample)
         self._subs.append(sub)
+        self._entity_token("MS", topic, type_name, self.types.hash_rihs01(type_name))
         return sub
 
     def close(self) -> None:
+        for token in self._tokens:
+            token.undeclare()
         for sub in self._subs:
             sub.undeclare()
         for pub in self._pubs.values():
