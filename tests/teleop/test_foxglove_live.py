@@ -9,6 +9,7 @@ import contextlib
 import json
 import struct
 
+import numpy as np
 import pytest
 
 pytest.importorskip("foxglove", reason="the live Foxglove server needs foxglove-sdk (viz extra)")
@@ -99,3 +100,46 @@ def test_garbage_from_a_client_does_not_stop_the_server() -> None:
         got = asyncio.run(_receive(fl.url, ("/session/state",)))
         assert fl.published > n  # still publishing
     assert json.loads(got["/session/state"][-1][1])["state"] == "engaged"
+
+
+def test_a_humanoid_is_published_as_its_urdf_and_link_frames() -> None:
+    """With a humanoid, /robot/tf places every URDF link by forward kinematics at the
+    reported joints, and /robot_description carries the URDF's text."""
+    pytest.importorskip("pinocchio")
+    pytest.importorskip("google.protobuf")
+    from mocapkit.retarget.robot_model import build_humanoid
+    from mocapkit.retarget.robot_spec import load_robot_spec
+
+    robot = build_humanoid(load_robot_spec("g1"))
+    snap = dict(SNAP)
+    snap["robot_joints_deg"] = {n: 0.0 for n in robot.iq_names}
+    snap["robot_joints_deg"]["right_elbow_joint"] = 90.0
+    with FoxgloveLive(lambda: snap, port=0, robot=robot).start() as fl:
+        got = asyncio.run(_receive(fl.url, ("/robot/tf", "/robot_description"), want=1))
+    _, payload, chan = got["/robot_description"][0]
+    assert chan["schemaName"] == "std_msgs/String"
+    assert json.loads(payload)["data"].lstrip().startswith("<")
+    assert "right_elbow_link" in json.loads(payload)["data"]
+    _, tf_bytes, tf_chan = got["/robot/tf"][0]
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    fds = descriptor_pb2.FileDescriptorSet.FromString(base64.b64decode(tf_chan["schema"]))
+    pool = descriptor_pool.DescriptorPool()
+    for f in fds.file:
+        pool.Add(f)
+    cls = message_factory.GetMessageClass(pool.FindMessageTypeByName("foxglove.FrameTransforms"))
+    tfs = {t.child_frame_id: t for t in cls.FromString(tf_bytes).transforms}
+    assert {"pelvis", "right_elbow_link", "right_wrist_yaw_link"} <= set(tfs)
+    assert tfs["pelvis"].translation.z > 0.5  # standing at its reference height
+    # the frames follow the joints: bending the elbow by 90 deg moves the wrist, not the
+    # elbow (what /robot/tf carries, computed for two elbow angles)
+    from mocapkit.teleop.foxglove_live import RobotFrames
+
+    frames = RobotFrames(robot)
+    a = {n: (p, q) for n, p, q in frames.links(snap["robot_joints_deg"])}
+    bent = dict(snap["robot_joints_deg"], right_elbow_joint=0.0)
+    b = {n: (p, q) for n, p, q in frames.links(bent)}
+    np.testing.assert_allclose(a["right_elbow_link"][0], b["right_elbow_link"][0], atol=1e-9)
+    assert np.linalg.norm(a["right_wrist_yaw_link"][0] - b["right_wrist_yaw_link"][0]) > 0.1
+    elbow = tfs["right_elbow_link"].translation
+    np.testing.assert_allclose([elbow.x, elbow.y, elbow.z], a["right_elbow_link"][0], atol=1e-6)

@@ -137,7 +137,9 @@ def run_live(
             if options.foxglove_port is not None:
                 from mocapkit.teleop.foxglove_live import FoxgloveLive
 
-                fox = FoxgloveLive(live.snapshot, port=options.foxglove_port)
+                humanoid = live.pipeline.humanoid
+                fox = FoxgloveLive(live.snapshot, port=options.foxglove_port,
+                                   robot=None if humanoid is None else humanoid.robot)  # fmt: skip
                 stack.enter_context(fox.start())
                 print(f"teleop run: Foxglove: open a WebSocket connection to {fox.url}",
                       file=sys.stderr, flush=True)  # fmt: skip
