@@ -123,3 +123,38 @@ def test_batch_retarget_passes_the_robot_through_args(tmp_path: Path, capsys) ->
     assert "left_knee_joint" in header
     rows = [json.loads(line) for line in (out / MANIFEST).read_text().splitlines()]
     assert all(r["figures"]["robot"] == "g1" for r in rows)
+
+
+def test_url_inputs_and_outputs_through_fsspec(corpus: Path, tmp_path: Path) -> None:
+    """Inputs and the output directory as fsspec URLs: a pattern at a URL, each input
+    copied to the worker, each output put at its URL, the manifest beside them, the lock
+    held at the URL while the batch runs; resumable (an output that exists is skipped).
+    ``memory://`` (one process) and ``file://`` (worker processes) stand in for S3/GCS."""
+    require_peer("fsspec", extra="corpus")
+    import fsspec
+
+    mem = fsspec.filesystem("memory")
+    for p in sorted(corpus.iterdir()):
+        mem.pipe(f"/trials/{p.name}", p.read_bytes())
+    res = run_batch("markers", ["memory://trials/*.trc"], "memory://results")
+    assert (res.files, res.ok, res.failed) == (3, 2, 1)
+    failed = res.failures[0]["file"]  # named by its URL
+    assert failed.startswith("memory://")
+    assert failed.endswith("/trials/broken.trc")
+    for name in GOOD:
+        assert mem.size(f"/results/{name.replace('.trc', '.mot')}") > 0
+    rows = [json.loads(x) for x in mem.cat("/results/" + MANIFEST).decode().splitlines()]
+    assert sorted(r["ok"] for r in rows) == [False, True, True]
+    assert not mem.exists("/results/" + LOCK)
+    again = run_batch("markers", ["memory://trials/*.trc"], "memory://results")
+    assert (again.skipped, again.ok, again.failed) == (2, 0, 1)
+    assert len(mem.cat("/results/" + MANIFEST).decode().splitlines()) == 4  # appended
+    # a lock at the URL: another batch writes there
+    mem.pipe("/results/" + LOCK, b"1")
+    with pytest.raises(ConfigError, match="another batch is writing there"):
+        run_batch("markers", ["memory://trials/*.trc"], "memory://results")
+    # worker processes: file:// URLs, local outputs
+    out = tmp_path / "out"
+    res = run_batch("markers", [f"file://{corpus}"], out, workers=2)
+    assert (res.ok, res.failed) == (2, 1)
+    assert (out / GOOD[0].replace(".trc", ".mot")).stat().st_size > 0

@@ -36,9 +36,14 @@ def register(sub: Any) -> None:
         "kind", choices=["markers", "imu", "body", "retarget"], help="which command to run"
     )
     p.add_argument(
-        "inputs", nargs="+", help="files, directories, globs ('*.c3d') or @list.txt files"
+        "inputs",
+        nargs="+",
+        help="files, directories, globs ('*.c3d'), @list.txt files, or fsspec URLs "
+        "('s3://bucket/trials/*.c3d'; the corpus extra and the file system's package)",
     )
-    p.add_argument("-o", "--output", required=True, help="output directory")
+    p.add_argument(
+        "-o", "--output", required=True, help="output directory (a local path or an fsspec URL)"
+    )
     p.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
     p.add_argument(
         "--engine",
