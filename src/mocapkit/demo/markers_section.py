@@ -9,6 +9,7 @@ build, the section says so and the rest of the demo runs.
 from __future__ import annotations
 
 import importlib.util
+import logging
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from importlib.resources import as_file, files
@@ -23,6 +24,10 @@ from mocapkit.viz.plots import joint_angles_figure, marker_residuals_figure
 from mocapkit.viz.report import HtmlReport
 
 WALK = "subject01_walk1.trc"
+# the tutorial subject's, from OpenSim's subject01_Setup_Scale.xml (a user passes
+# --height-m / --mass-kg; the demo knows them, so it asks nothing it cannot act on)
+SUBJECT_HEIGHT_M = 1.8034
+SUBJECT_MASS_KG = 72.6
 STATIC = "subject01_static_crop.trc"
 SAGITTAL = ("hip_flexion_r", "knee_angle_r", "ankle_angle_r", "hip_flexion_l", "knee_angle_l")
 
@@ -79,11 +84,17 @@ def run_markers(
     outputs: dict[str, Path] = {}
     with ExitStack() as stack:
         walk, static = bundled_marker_files(stack)
+        # what the reconstruction leaves out comes back in result.warnings and goes into
+        # the report, not onto the terminal (nothing there the demo's user could act on)
+        quiet = logging.getLogger("mocapkit.markers")
+        stack.callback(quiet.setLevel, quiet.level)
+        quiet.setLevel(logging.ERROR)
         for i, method in enumerate(methods):
             progress("marker reconstruction", i, len(methods))
             result, _subject, _cleaning = run(
-                walk, static, None, None, None, ReconstructionOptions(method=method)
-            )
+                walk, static, None, SUBJECT_HEIGHT_M, SUBJECT_MASS_KG,
+                ReconstructionOptions(method=method),
+            )  # fmt: skip
             outputs[f"markers_{method}_mot"] = result.write_mot(out_dir / f"walk1_{method}.mot")
             outcomes.append(
                 MarkerOutcome(

@@ -193,7 +193,9 @@ def evaluate_shape(
             _sleep_until(t_go + motion.engage_t)
             live.engage()
             sent = sender.wait(end + 30.0)
-            _sleep_until(time.perf_counter() + 0.5)
+            # the last packets through the chain and the robot's last reports; shorter than
+            # the receiver's missing_after_s (0.5 s): the sensors ended, they did not fail
+            _sleep_until(time.perf_counter() + 0.3)
         transitions = [
             f"{tr.source.value}->{tr.target.value}: {tr.reason}" for tr in live.session.transitions
         ]
