@@ -79,6 +79,11 @@ HINGE_MIN_SHARE = 0.8
 # A two-axis joint's first axis (elbow, ankle flexion) is at least this far from the
 # parent segment's long axis (anatomically ~90 deg).
 MIN_FIRST_FROM_LONG_DEG = 60.0
+# The automatic calibration uses the motion up to this long after the still window [s].
+MAX_MOTION_S = 300.0
+# The hinge fits use at most this many samples of motion (evenly spread): enough for a
+# 3x3 eigenproblem, bounded whatever the recording's length.
+MAX_FIT_SAMPLES = 20_000
 # Alternations of the two-axis fit (each a pair of 3x3 eigenproblems; settled by ~10).
 SECOND_AXIS_ITERATIONS = 30
 # Moving-average length [s] for the angular rate before the principal axis (twice: a
@@ -200,6 +205,9 @@ def _first_of_two_axes(
     if fast.sum() < 50:
         return None
     w, r_rel = w[fast], r_rel[fast]
+    if len(w) > MAX_FIT_SAMPLES:  # evenly spread (an average of exact constraints is exact)
+        pick = np.linspace(0, len(w) - 1, MAX_FIT_SAMPLES).astype(int)
+        w, r_rel = w[pick], r_rel[pick]
     w_c = np.einsum("nji,nj->ni", r_rel, w)
     energy = float(np.sum(w * w))
     best: tuple[FloatArray, float] | None = None
@@ -210,8 +218,11 @@ def _first_of_two_axes(
         if not np.isfinite(j2).all():
             continue
         for _ in range(SECOND_AXIS_ITERATIONS):
+            before = j1
             j1 = _plane_normal_fit(np.einsum("nij,j->ni", r_rel, j2), w, smooth)
             j2 = _plane_normal_fit(np.einsum("nji,j->ni", r_rel, j1), w_c, smooth)
+            if abs(float(before @ j1)) > 1.0 - 1e-12:  # settled
+                break
         v = np.einsum("nij,j->ni", r_rel, j2)
         normal = np.cross(j1, v)
         size = np.linalg.norm(normal, axis=1)
@@ -437,15 +448,18 @@ def calibrate_functional(
 
     if len(psis) == 1:
         return build(psis[0])
-    return _choose_forward(tree, orientations, [build(p) for p in psis])
+    window = motion_window or (-np.inf, float(still_window[1]) + MAX_MOTION_S)
+    return _choose_forward(tree, orientations, [build(p) for p in psis], window)
 
 
 def _motion_mask(
     s: OrientationSeries, still_idx: np.ndarray, motion_window: tuple[float, float] | None
 ) -> np.ndarray:
-    """(N,) samples of motion: the window given, else everything outside the still one."""
+    """(N,) samples of motion: the window given, else everything outside the still one up
+    to ``MAX_MOTION_S`` after it (an hour's recording calibrates from its first minutes:
+    bounded time and memory, and a strap that slips later does not pull the calibration)."""
     if motion_window is None:
-        use = np.ones(s.n_samples, dtype=bool)
+        use = s.time <= (s.time[still_idx[-1]] if still_idx.size else s.time[0]) + MAX_MOTION_S
         use[still_idx] = False
     else:
         use = np.zeros(s.n_samples, dtype=bool)
@@ -515,10 +529,21 @@ def yaw_segment(q_ground_segment: FloatArray) -> FloatArray:
 
 
 def _choose_forward(
-    tree: SensorTree, orientations: Mapping[str, OrientationSeries], options: list[BodyCalibration]
+    tree: SensorTree,
+    orientations: Mapping[str, OrientationSeries],
+    options: list[BodyCalibration],
+    window: tuple[float, float],
 ) -> BodyCalibration:
-    """Of two calibrations facing opposite ways, the one whose knees/elbows flex positive."""
+    """Of two calibrations facing opposite ways, the one whose knees/elbows flex positive
+    over the calibration's motion ``window`` [s]."""
     from mocapkit.body.kinematics import body_angles
+
+    cut = {}
+    for name, s in orientations.items():
+        keep = (s.time >= window[0]) & (s.time <= window[1])
+        cut[name] = s if keep.all() else OrientationSeries(s.time[keep], s.quat[keep], s.name,
+                                                           s.frame)  # fmt: skip
+    orientations = cut
 
     present = [c for c in FLEXION_COORDINATES if c in tree.coordinate_names]
     if not present:
