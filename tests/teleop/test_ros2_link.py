@@ -134,7 +134,7 @@ def test_controller_joints_must_be_the_models() -> None:
     with pytest.raises(ConfigError, match="controller joints elbow are not joints"):
         Ros2RobotLink(JOINTS, ["tcp/127.0.0.1:1"], controller_joints=["hip", "elbow"])
     link = Ros2RobotLink(JOINTS, ["tcp/127.0.0.1:1"])
-    with link, pytest.raises(ConfigError, match="takes joint targets"):
+    with link, pytest.raises(ConfigError, match="takes joint targets; give it a pose topic"):
         link.send_command(np.eye(4))
 
 
@@ -160,7 +160,8 @@ def test_g1_follows_the_operator_through_a_ros2_robot(tmp_path) -> None:
                              np.random.default_rng(0))  # fmt: skip
     robots: list[FakeRobot] = []
 
-    def make_link(joints: tuple[str, ...]) -> Ros2RobotLink:
+    def make_link(pipeline) -> Ros2RobotLink:  # type: ignore[no-untyped-def]
+        joints = pipeline.robot_joint_names
         robot = FakeRobot(list(joints), np.zeros(len(joints)), speed=3.0).__enter__()
         robots.append(robot)
         return Ros2RobotLink(joints, [robot.endpoint], domain_id=0)
@@ -191,3 +192,48 @@ def test_g1_follows_the_operator_through_a_ros2_robot(tmp_path) -> None:
     finally:
         for r in robots:
             r.__exit__()
+
+
+def test_an_arm_gets_end_effector_poses_for_its_own_ik() -> None:
+    """The paper's Robonaut route: end-effector targets (PoseStamped in the arm's base
+    frame) to the robot's IK, its current end-effector pose back as the reports."""
+    import zenoh
+
+    port = _free_port()
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", f'["tcp/127.0.0.1:{port}"]')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    targets: list = []
+    with (
+        zenoh.open(conf) as router,
+        Ros2ZenohPublisher(connect=[f"tcp/127.0.0.1:{port}"], domain_id=0) as arm,
+    ):
+        del router
+        arm.subscribe("/target_pose", "geometry_msgs/msg/PoseStamped", targets.append)
+        ends = [f"tcp/127.0.0.1:{port}"]
+        frame = "r2/right_base"
+        link = Ros2RobotLink((), ends, domain_id=0, pose_topic="/target_pose", frame_id=frame)
+        with link:
+            assert link.robot_pose() is None
+            for _ in range(50):  # the arm reports where its hand is
+                arm.pose_stamped("/current_pose", "r2/right_base", [0.4, -0.2, 0.1],
+                                 [np.cos(0.25), 0.0, 0.0, np.sin(0.25)])  # fmt: skip
+                if link.poll():
+                    break
+                time.sleep(0.02)
+            T = link.robot_pose()
+            assert T is not None
+            np.testing.assert_allclose(T[:3, 3], [0.4, -0.2, 0.1])
+            c, si = np.cos(0.5), np.sin(0.5)
+            np.testing.assert_allclose(T[:2, :2], [[c, -si], [si, c]], atol=1e-12)
+            assert link.latest.q.shape == (0,)
+            goal = np.eye(4)
+            goal[:3, 3] = [0.5, -0.1, 0.2]
+            link.send_command(goal)
+            assert _wait(lambda: any(m is not None for m in targets), 5.0)
+            msg = next(m for m in targets if m is not None)
+            assert msg.header.frame_id == "r2/right_base"
+            p = msg.pose.position
+            assert (p.x, p.y, p.z) == (0.5, -0.1, 0.2)
+            assert msg.pose.orientation.w == 1.0

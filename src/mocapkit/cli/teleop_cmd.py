@@ -146,8 +146,25 @@ def register(sub: Any) -> None:
         choices=("server", "ros2"),
         default="server",
         help="server: mocapkit's robot server (UDP; default); ros2: a ROS 2 robot over the "
-        "--ros2-zenoh endpoints, joint targets to --ros2-command-topic and its joint states "
-        "from --ros2-state-topic (humanoids: --robot g1, talos, ...)",
+        "--ros2-zenoh endpoints: a humanoid (--robot g1, ...) gets joint targets on "
+        "--ros2-command-topic and reports --ros2-state-topic; an arm (robonaut2-right) gets "
+        "end-effector poses for its own IK on --ros2-pose-topic and reports "
+        "--ros2-pose-state-topic",
+    )
+    rn.add_argument(
+        "--ros2-pose-topic",
+        default="/target_pose",
+        help="with --robot-link ros2 and an arm: geometry_msgs/PoseStamped targets",
+    )
+    rn.add_argument(
+        "--ros2-pose-state-topic",
+        default="/current_pose",
+        help="with --robot-link ros2 and an arm: the robot's end-effector PoseStamped",
+    )
+    rn.add_argument(
+        "--ros2-frame",
+        default="base",
+        help="with --robot-link ros2 and an arm: frame_id of the targets (the arm's base)",
     )
     rn.add_argument(
         "--ros2-command-topic",
@@ -300,6 +317,9 @@ def _run(args: argparse.Namespace) -> int:
             controller_joints=None
             if args.ros2_joints is None
             else tuple(j.strip() for j in args.ros2_joints.split(",") if j.strip()),
+            pose_topic=args.ros2_pose_topic,
+            pose_state_topic=args.ros2_pose_state_topic,
+            frame_id=args.ros2_frame,
         ),
     )
     summary = run_live(config, options)

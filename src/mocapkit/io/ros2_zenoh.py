@@ -144,6 +144,25 @@ class Ros2ZenohPublisher:
         )  # fmt: skip
         return self.publish(topic, "sensor_msgs/msg/JointState", msg)
 
+    def pose_stamped(
+        self, topic: str, frame_id: str, pos: Any, quat_wxyz: Any, t_ns: int | None = None,
+    ) -> str:  # fmt: skip
+        """A ``geometry_msgs/PoseStamped`` (position [m], orientation from ``[w, x, y, z]``)."""
+        t_ns = time.time_ns() if t_ns is None else t_ns
+        T = self.types.types
+        header = T["std_msgs/msg/Header"](
+            stamp=T["builtin_interfaces/msg/Time"](sec=t_ns // 10**9, nanosec=t_ns % 10**9),
+            frame_id=frame_id,
+        )
+        w, x, y, z = (float(v) for v in quat_wxyz)
+        px, py, pz = (float(v) for v in pos)
+        pose = T["geometry_msgs/msg/Pose"](
+            position=T["geometry_msgs/msg/Point"](x=px, y=py, z=pz),
+            orientation=T["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w),
+        )
+        msg = T["geometry_msgs/msg/PoseStamped"](header=header, pose=pose)
+        return self.publish(topic, "geometry_msgs/msg/PoseStamped", msg)
+
     def float64_array(self, topic: str, values: Sequence[float]) -> str:
         """A ``std_msgs/Float64MultiArray`` (no layout): what ros2_control's forward command
         controllers take on ``/<controller>/commands``."""

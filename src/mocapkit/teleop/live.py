@@ -117,9 +117,9 @@ class LiveSession:
         robot_address: the robot server's ``(host, port)``.
         record: an MCAP file to record the session to (None: no recording).
         keep_frames: keep every processed frame and robot report in memory (evaluation).
-        make_link: builds another robot link from the robot model's joint names instead
-            of the UDP client of ``robot_address`` (:class:`~mocapkit.teleop.ros2_link.
-            Ros2RobotLink`).
+        make_link: builds another robot link for the pipeline (its robot's joints, arm or
+            humanoid) instead of the UDP client of ``robot_address``
+            (:class:`~mocapkit.teleop.ros2_link.Ros2RobotLink`).
     """
 
     def __init__(
@@ -128,7 +128,7 @@ class LiveSession:
         robot_address: tuple[str, int] | None,
         record: str | Path | None = None,
         keep_frames: bool = False,
-        make_link: Callable[[tuple[str, ...]], Any] | None = None,
+        make_link: Callable[[TeleopPipeline], Any] | None = None,
     ) -> None:
         self.config = config
         humanoid = config.pipeline.robot not in available_robots()
@@ -136,8 +136,8 @@ class LiveSession:
             HumanoidSession(config.session) if humanoid else TeleopSession(config.session)
         )
         self.pipeline = TeleopPipeline(config.pipeline, self.session, None)
-        if make_link is not None:  # another robot link (ROS 2): given the robot's joints
-            self.link = make_link(self.pipeline.robot_joint_names)
+        if make_link is not None:  # another robot link (ROS 2), made for this pipeline's robot
+            self.link = make_link(self.pipeline)
             self.link.on_report = self._on_report
         elif robot_address is None:
             raise ConfigError("live session: give the robot server's address or a link")

@@ -15,6 +15,10 @@ UDP robot server) stands in the live session, for robots driven joint by joint
   joint order. A state that lacks one of them, or a payload that does not decode, is
   counted (``malformed``) and dropped with a warning naming the joints.
 - a HOLD sends nothing: a forward controller keeps its last target.
+- an arm driven through the robot's own IK (the paper's Robonaut; ``pose_topic`` given):
+  end-effector targets as ``geometry_msgs/PoseStamped`` (in ``frame_id``, the arm's base)
+  on ``pose_topic``, the robot's current end-effector pose (``PoseStamped``) from
+  ``pose_state_topic`` as the reports; no joints.
 - the synchronisation the paper's robot enforced is the session's own here: the robot
   reports itself ready (``Gate.SYNCED``) and :class:`~mocapkit.teleop.humanoid_session.
   HumanoidSession` aligns from the reported joints at its limited rate before it follows.
@@ -38,6 +42,7 @@ from mocapkit.teleop import protocol as proto
 log = logging.getLogger("mocapkit.teleop.ros2_link")
 
 COMMAND_TOPIC = "/forward_position_controller/commands"
+POSE_STATE_TOPIC = "/current_pose"
 STATE_TOPIC = "/joint_states"
 
 
@@ -62,10 +67,15 @@ class Ros2RobotLink:
         controller_joints: Sequence[str] | None = None,
         on_report: Callable[[float, proto.Report], None] | None = None,
         domain_id: int | None = None,
+        pose_topic: str | None = None,
+        pose_state_topic: str = POSE_STATE_TOPIC,
+        frame_id: str = "base",
     ) -> None:
         from mocapkit.io.ros2_zenoh import Ros2ZenohPublisher
 
-        self.joint_names = list(joint_names)
+        self.pose_topic = pose_topic
+        self.frame_id = frame_id
+        self.joint_names = [] if pose_topic is not None else list(joint_names)
         order = list(controller_joints) if controller_joints is not None else self.joint_names
         unknown = [j for j in order if j not in self.joint_names]
         if unknown:
@@ -88,7 +98,13 @@ class Ros2RobotLink:
         self._reports = 0
         self._warned = False
         self.pub = Ros2ZenohPublisher(connect=connect, domain_id=domain_id)
-        self.pub.subscribe(state_topic, "sensor_msgs/msg/JointState", self._on_state)
+        self._pose_in: tuple[FloatArray, FloatArray] = (np.zeros(3), np.array([1.0, 0, 0, 0]))
+        self._pose_m = np.eye(4)
+        if pose_topic is not None:
+            self.address = f"ROS 2 {pose_topic} / {pose_state_topic} over Zenoh"
+            self.pub.subscribe(pose_state_topic, "geometry_msgs/msg/PoseStamped", self._on_pose)
+        else:
+            self.pub.subscribe(state_topic, "sensor_msgs/msg/JointState", self._on_state)
 
     # -- from Zenoh's thread ----------------------------------------------------------------
     def _on_state(self, msg: Any) -> None:
@@ -109,6 +125,21 @@ class Ros2RobotLink:
         with self._lock:
             self._incoming = (time.monotonic(), q)
 
+    def _on_pose(self, msg: Any) -> None:
+        if msg is None:
+            self._malformed("a PoseStamped that does not decode")
+            return
+        p, o = msg.pose.position, msg.pose.orientation
+        pos = np.array([p.x, p.y, p.z], dtype=np.float64)
+        quat = np.array([o.w, o.x, o.y, o.z], dtype=np.float64)
+        norm = float(np.linalg.norm(quat))
+        if not (np.isfinite(pos).all() and np.isfinite(quat).all() and norm > 0.5):
+            self._malformed("a pose that is not finite or not a rotation")
+            return
+        with self._lock:
+            self._pose_in = (pos, quat / norm)
+            self._incoming = (time.monotonic(), np.zeros(0))
+
     def _malformed(self, what: str) -> None:
         self.malformed += 1
         if not self._warned:  # once: a robot that names its joints otherwise says so 100x/s
@@ -128,10 +159,23 @@ class Ros2RobotLink:
         return self.seq
 
     def send_command(self, T_base_ee: Any) -> int:
-        raise ConfigError(
-            "the ROS 2 robot link takes joint targets: use a humanoid robot (--robot g1, "
-            "talos, ...) or mocapkit's robot server for end-effector poses"
-        )
+        """An end-effector target (4, 4) [m] in the arm's base frame, for the robot's IK."""
+        if self.pose_topic is None:
+            raise ConfigError(
+                "this ROS 2 robot link takes joint targets; give it a pose topic for "
+                "end-effector poses (--ros2-pose-topic)"
+            )
+        from mocapkit.geometry import quat_from_matrix
+
+        self.seq += 1
+        T = np.asarray(T_base_ee, dtype=np.float64)
+        try:
+            self.pub.pose_stamped(self.pose_topic, self.frame_id, T[:3, 3],
+                                  quat_from_matrix(T[:3, :3]))  # fmt: skip
+        except Exception as exc:  # a Zenoh peer that disappears must not stop the session
+            self.send_errors += 1
+            log.debug("ROS 2 command failed: %s", exc)
+        return self.seq
 
     def send_hold(self) -> None:
         """Nothing to send: a forward controller keeps its last target."""
@@ -139,14 +183,14 @@ class Ros2RobotLink:
     def poll(self) -> int:
         with self._lock:
             incoming, self._incoming = self._incoming, None
+            pos, quat = self._pose_in
         if incoming is None:
             return 0
         t, q = incoming
         self._reports += 1
         report = proto.Report(
-            seq=self._reports, t_send_ns=time.monotonic_ns(), pos=np.zeros(3),
-            quat=np.array([1.0, 0.0, 0.0, 0.0]), last_command_seq=self.seq,
-            gate=proto.Gate.SYNCED, reason=proto.Reason.OK, q=q,
+            seq=self._reports, t_send_ns=time.monotonic_ns(), pos=pos, quat=quat,
+            last_command_seq=self.seq, gate=proto.Gate.SYNCED, reason=proto.Reason.OK, q=q,
         )  # fmt: skip
         self.latest, self.latest_t = report, t
         if self.on_report is not None:
@@ -157,7 +201,14 @@ class Ros2RobotLink:
         return False  # the robot publishes its joint states whether we speak or not
 
     def robot_pose(self) -> FloatArray | None:
-        return None
+        """The latest reported end-effector pose (4, 4) (pose mode), else None."""
+        if self.pose_topic is None or self.latest is None:
+            return None
+        from mocapkit.geometry import quat_to_matrix
+
+        self._pose_m[:3, :3] = quat_to_matrix(self.latest.quat)
+        self._pose_m[:3, 3] = self.latest.pos
+        return self._pose_m
 
     def report_age(self, now: float | None = None) -> float:
         return (time.monotonic() if now is None else now) - self.latest_t
@@ -180,4 +231,4 @@ class Ros2RobotLink:
         self.close()
 
 
-__all__ = ["COMMAND_TOPIC", "STATE_TOPIC", "Ros2RobotLink"]
+__all__ = ["COMMAND_TOPIC", "POSE_STATE_TOPIC", "STATE_TOPIC", "Ros2RobotLink"]

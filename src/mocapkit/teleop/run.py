@@ -30,11 +30,16 @@ log = logging.getLogger("mocapkit.teleop.run")
 @dataclass(frozen=True)
 class Ros2RobotOptions:
     """The robot is a ROS 2 machine's (:mod:`mocapkit.teleop.ros2_link`), over the
-    ``ros2_zenoh`` endpoints: targets to ``command_topic``, its ``state_topic`` back."""
+    ``ros2_zenoh`` endpoints. A humanoid: joint targets to ``command_topic``, its
+    ``state_topic`` back. An arm: end-effector poses to ``pose_topic`` (in ``frame_id``),
+    its ``pose_state_topic`` back."""
 
     command_topic: str = "/forward_position_controller/commands"
     state_topic: str = "/joint_states"
     controller_joints: tuple[str, ...] | None = None
+    pose_topic: str = "/target_pose"  # an arm: end-effector targets for the robot's IK
+    pose_state_topic: str = "/current_pose"
+    frame_id: str = "base"
 
 
 @dataclass(frozen=True)
@@ -119,9 +124,13 @@ def run_live(
         ros = options.ros2_robot
         endpoints = options.ros2_zenoh or ()
 
-        def make_link(joints: tuple[str, ...]) -> Any:
-            return Ros2RobotLink(joints, endpoints, command_topic=ros.command_topic,
-                                 state_topic=ros.state_topic,
+        def make_link(pipeline: Any) -> Any:
+            if pipeline.humanoid is None:  # an arm: end-effector poses for the robot's IK
+                return Ros2RobotLink((), endpoints, pose_topic=ros.pose_topic,
+                                     pose_state_topic=ros.pose_state_topic,
+                                     frame_id=ros.frame_id)  # fmt: skip
+            return Ros2RobotLink(pipeline.robot_joint_names, endpoints,
+                                 command_topic=ros.command_topic, state_topic=ros.state_topic,
                                  controller_joints=ros.controller_joints)  # fmt: skip
 
     with (
