@@ -24,6 +24,17 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def listening_peer() -> tuple[object, str]:
+    """A Zenoh peer listening on a free loopback port (the ROS machine's rmw_zenohd role),
+    without multicast scouting: (session, its endpoint)."""
+    port = _free_port()
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("listen/endpoints", f'["tcp/127.0.0.1:{port}"]')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(conf), f"tcp/127.0.0.1:{port}"
+
+
 def test_key_expression_is_rmw_zenohs() -> None:
     k = key_expr(0, "/mocapkit/joint_states", "sensor_msgs/msg/JointState", "RIHS01_ab")
     assert k == "0/mocapkit/joint_states/sensor_msgs::msg::dds_::JointState_/RIHS01_ab"
@@ -34,15 +45,11 @@ def test_a_zenoh_subscriber_decodes_the_joint_states() -> None:
     from rosbags.typesys import Stores, get_typestore
 
     types = get_typestore(Stores.ROS2_JAZZY)
-    port = _free_port()
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("listen/endpoints", f'["tcp/127.0.0.1:{port}"]')
-    conf.insert_json5("scouting/multicast/enabled", "false")
+    sub_session, endpoint = listening_peer()
     got: list = []
     done = threading.Event()
     h = types.hash_rihs01("sensor_msgs/msg/JointState")
-    with zenoh.open(conf) as sub_session:
+    with sub_session:
 
         def on_sample(sample) -> None:
             got.append((str(sample.key_expr), bytes(sample.payload.to_bytes()),
@@ -51,7 +58,7 @@ def test_a_zenoh_subscriber_decodes_the_joint_states() -> None:
                 done.set()
 
         sub = sub_session.declare_subscriber(f"0/**/{h}", on_sample)
-        with Ros2ZenohPublisher(connect=[f"tcp/127.0.0.1:{port}"], domain_id=0) as pub:
+        with Ros2ZenohPublisher(connect=[endpoint], domain_id=0) as pub:
             time.sleep(0.5)  # the sessions meet
             for k in range(20):
                 pub.joint_state("/mocapkit/joint_states", ["hip", "knee"], [0.1 * k, -0.5])
@@ -87,13 +94,9 @@ def _split_token(key: str) -> dict[str, str]:
 def test_graph_tokens_as_rmw_zenoh_reads_them() -> None:
     """A ROS 2 graph (ros2 node list, ros2 topic list) sees mocapkit's node, its
     publisher and its subscription through liveliness tokens in rmw_zenoh's format."""
-    port = _free_port()
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("listen/endpoints", f'["tcp/127.0.0.1:{port}"]')
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    with zenoh.open(conf) as graph:
-        with Ros2ZenohPublisher(connect=[f"tcp/127.0.0.1:{port}"], domain_id=7) as pub:
+    graph, endpoint = listening_peer()
+    with graph:
+        with Ros2ZenohPublisher(connect=[endpoint], domain_id=7) as pub:
             pub.joint_state("/mocapkit/joint_states", ["hip"], [0.1])
             pub.subscribe("/joint_states", "sensor_msgs/msg/JointState", lambda m: None)
             time.sleep(0.5)

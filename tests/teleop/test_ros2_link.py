@@ -4,7 +4,6 @@ Float64MultiArray commands) and the live chain driving G1 through it."""
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 
@@ -18,16 +17,12 @@ from mocapkit.errors import ConfigError
 from mocapkit.io.ros2_zenoh import Ros2ZenohPublisher
 from mocapkit.teleop import protocol as proto
 from mocapkit.teleop.ros2_link import Ros2RobotLink
+from tests.io.test_ros2_zenoh import listening_peer
+from tests.teleop.test_live import _wait
 
 pytestmark = pytest.mark.realtime
 
 JOINTS = ["hip", "knee", "ankle"]
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class FakeRobot:
@@ -36,29 +31,17 @@ class FakeRobot:
     joints towards the last command at ``speed`` [rad/s]."""
 
     def __init__(self, names: list[str], q0: np.ndarray, speed: float = 2.0) -> None:
-        import zenoh
-
-        self.port = _free_port()
+        self.session, self.endpoint = listening_peer()  # the ROS machine's router role
         self.names = list(names)
         self.q = np.asarray(q0, dtype=float).copy()
         self.speed = speed
         self.commands: list[np.ndarray] = []
         self.order = list(names)  # the controller's joints
-        # a listening peer (the ROS machine's router role)
-        conf = zenoh.Config()
-        conf.insert_json5("mode", '"peer"')
-        conf.insert_json5("listen/endpoints", f'["tcp/127.0.0.1:{self.port}"]')
-        conf.insert_json5("scouting/multicast/enabled", "false")
-        self.session = zenoh.open(conf)
-        self.node = Ros2ZenohPublisher(connect=[f"tcp/127.0.0.1:{self.port}"], domain_id=0)
+        self.node = Ros2ZenohPublisher(connect=[self.endpoint], domain_id=0)
         self.node.subscribe("/forward_position_controller/commands",
                             "std_msgs/msg/Float64MultiArray", self._on_command)  # fmt: skip
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, daemon=True)
-
-    @property
-    def endpoint(self) -> str:
-        return f"tcp/127.0.0.1:{self.port}"
 
     def _on_command(self, msg) -> None:  # type: ignore[no-untyped-def]
         if msg is not None:
@@ -84,15 +67,6 @@ class FakeRobot:
         self._thread.join(2.0)
         self.node.close()
         self.session.close()
-
-
-def _wait(cond, timeout: float) -> bool:  # type: ignore[no-untyped-def]
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if cond():
-            return True
-        time.sleep(0.01)
-    return False
 
 
 def test_reports_in_the_models_order_and_targets_in_the_controllers() -> None:
@@ -197,21 +171,11 @@ def test_g1_follows_the_operator_through_a_ros2_robot(tmp_path) -> None:
 def test_an_arm_gets_end_effector_poses_for_its_own_ik() -> None:
     """The paper's Robonaut route: end-effector targets (PoseStamped in the arm's base
     frame) to the robot's IK, its current end-effector pose back as the reports."""
-    import zenoh
-
-    port = _free_port()
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("listen/endpoints", f'["tcp/127.0.0.1:{port}"]')
-    conf.insert_json5("scouting/multicast/enabled", "false")
+    router, endpoint = listening_peer()
     targets: list = []
-    with (
-        zenoh.open(conf) as router,
-        Ros2ZenohPublisher(connect=[f"tcp/127.0.0.1:{port}"], domain_id=0) as arm,
-    ):
-        del router
+    with router, Ros2ZenohPublisher(connect=[endpoint], domain_id=0) as arm:
         arm.subscribe("/target_pose", "geometry_msgs/msg/PoseStamped", targets.append)
-        ends = [f"tcp/127.0.0.1:{port}"]
+        ends = [endpoint]
         frame = "r2/right_base"
         link = Ros2RobotLink((), ends, domain_id=0, pose_topic="/target_pose", frame_id=frame)
         with link:

@@ -354,9 +354,10 @@ def _run_streamed(args: argparse.Namespace) -> int:
 
 def _write_quat_csv(path: Path, time: Any, labels: list[str], quats: Any) -> None:
     """A plain CSV: ``time_s`` then ``<sensor>_w, _x, _y, _z`` per sensor (q_world_sensor)."""
-    header = ["time_s"] + [f"{s}_{c}" for s in labels for c in "wxyz"]
-    table = np.column_stack([time, quats.reshape(len(time), -1)])
-    np.savetxt(path, table, delimiter=",", header=",".join(header), comments="", fmt="%.10g")
+    from mocapkit.io.opensim_table import QuaternionTableWriter
+
+    with QuaternionTableWriter(path, labels, 0.0, "", csv=True) as w:
+        w.write(np.asarray(time, dtype=float), np.asarray(quats, dtype=float))
 
 
 def _calibrate_mag(args: argparse.Namespace) -> int:

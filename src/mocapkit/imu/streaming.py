@@ -14,13 +14,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 
-from mocapkit._validate import FloatArray
 from mocapkit.errors import ConfigError
 from mocapkit.io.imu_csv import CHUNK_ROWS, iter_imu_csv
+from mocapkit.io.opensim_table import QuaternionTableWriter
 
 
 @dataclass
@@ -35,47 +35,6 @@ class StreamReport:
     acc_rejected: int = 0
     time_span: tuple[float, float] = (0.0, 0.0)
     notes: list[str] = field(default_factory=list)
-
-
-class QuaternionTableWriter:
-    """An orientation table written as it comes: OpenSense's quaternion ``.sto``/``.mot``
-    (as :func:`mocapkit.io.opensim_table.write_table` writes it) or a plain ``.csv``
-    (``time_s`` then ``<sensor>_w, _x, _y, _z``). The ``.sto`` header needs the rate,
-    given up front."""
-
-    def __init__(self, path: Path, labels: list[str], rate_hz: float, name: str) -> None:
-        self.path = Path(path)
-        self.csv = self.path.suffix.lower() == ".csv"
-        if not self.csv and self.path.suffix.lower() not in (".sto", ".mot"):
-            raise ConfigError(f"-o {path}: expected .sto, .mot or .csv")
-        self._f: IO[str] = open(self.path, "w")  # noqa: SIM115 (closed in close())
-        if self.csv:
-            header = ["time_s"] + [f"{s}_{c}" for s in labels for c in "wxyz"]
-            self._f.write(",".join(header) + "\n")
-            self._fmt = ",".join(["%.10g"] * (1 + 4 * len(labels)))
-        else:
-            lines = [name, "version=3", f"DataRate={rate_hz:.6f}", "DataType=Quaternion",
-                     "OpenSimVersion=4.1", "endheader", "\t".join(["time", *labels])]  # fmt: skip
-            self._f.write("\n".join(lines) + "\n")
-            cell = ",".join(["%.10g"] * 4)
-            self._fmt = "\t".join(["%.10g", *([cell] * len(labels))])
-        self.rows = 0
-
-    def write(self, time: FloatArray, quats: FloatArray) -> None:
-        """Append rows: ``time`` (N,) [s], ``quats`` (N, k, 4)."""
-        rows = np.column_stack([time, quats.reshape(time.shape[0], -1)]).tolist()
-        if rows:
-            self._f.write("\n".join([self._fmt % tuple(r) for r in rows]) + "\n")
-        self.rows += len(rows)
-
-    def close(self) -> None:
-        self._f.close()
-
-    def __enter__(self) -> QuaternionTableWriter:
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
 
 
 def run_csv_streaming(
@@ -128,4 +87,4 @@ def run_csv_streaming(
     return report
 
 
-__all__ = ["QuaternionTableWriter", "StreamReport", "run_csv_streaming"]
+__all__ = ["StreamReport", "run_csv_streaming"]

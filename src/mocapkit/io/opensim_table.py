@@ -17,7 +17,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
@@ -48,6 +48,51 @@ class OpenSimTable:
                 f"column {label!r} not in table; available: {', '.join(self.labels)}"
             ) from None
         return self.data[:, i]
+
+
+class QuaternionTableWriter:
+    """An orientation table written as it comes: OpenSense's quaternion ``.sto``/``.mot``
+    (as :func:`mocapkit.io.opensim_table.write_table` writes it) or a plain ``.csv``
+    (``time_s`` then ``<sensor>_w, _x, _y, _z``). The ``.sto`` header needs the rate,
+    given up front; ``csv`` chooses the format instead of the suffix."""
+
+    def __init__(
+        self, path: Path, labels: list[str], rate_hz: float, name: str,
+        data_type: str = "Quaternion", csv: bool | None = None,
+    ) -> None:  # fmt: skip
+        self.path = Path(path)
+        suffix = self.path.suffix.lower()
+        if csv is None and suffix not in (".sto", ".mot", ".csv"):
+            raise ShapeError(f"{path}: an orientation table is .sto, .mot or .csv")
+        self.csv = suffix == ".csv" if csv is None else csv
+        self._f: IO[str] = open(self.path, "w")  # noqa: SIM115 (closed in close())
+        if self.csv:
+            header = ["time_s"] + [f"{s}_{c}" for s in labels for c in "wxyz"]
+            self._f.write(",".join(header) + "\n")
+            self._fmt = ",".join(["%.10g"] * (1 + 4 * len(labels)))
+        else:
+            lines = [name, "version=3", f"DataRate={rate_hz:.6f}", f"DataType={data_type}",
+                     "OpenSimVersion=4.1", "endheader", "\t".join(["time", *labels])]  # fmt: skip
+            self._f.write("\n".join(lines) + "\n")
+            cell = ",".join(["%.10g"] * 4)
+            self._fmt = "\t".join(["%.10g", *([cell] * len(labels))])
+        self.rows = 0
+
+    def write(self, time: FloatArray, quats: FloatArray) -> None:
+        """Append rows: ``time`` (N,) [s], ``quats`` (N, k, 4)."""
+        rows = np.column_stack([time, quats.reshape(time.shape[0], -1)]).tolist()
+        if rows:
+            self._f.write("\n".join([self._fmt % tuple(r) for r in rows]) + "\n")
+        self.rows += len(rows)
+
+    def close(self) -> None:
+        self._f.close()
+
+    def __enter__(self) -> QuaternionTableWriter:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
 
 
 def write_table(
@@ -81,34 +126,27 @@ def write_table(
         if not label or any(c in label for c in "\t\n"):
             raise ShapeError(f"labels[{i}]: {label!r} is not a valid column name")
     p = Path(path)
-    lines = [name, "version=3"]
     if quat:
         rate = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 0.0
-        lines += [
-            f"DataRate={rate:.6f}",
-            f"DataType={data_type or 'Quaternion'}",
-            "OpenSimVersion=4.1",
-        ]
-    else:
-        lines += [f"nRows={t.shape[0]}", f"nColumns={len(labels) + 1}"]
-        lines.append(f"inDegrees={'yes' if in_degrees else 'no'}")
-        lines.append(f"DataType={data_type or 'double'}")
+        with QuaternionTableWriter(p, labels, rate, name, data_type or "Quaternion",
+                                   csv=False) as w:  # fmt: skip
+            for a in range(0, t.shape[0], _BLOCK_ROWS):
+                w.write(t[a : a + _BLOCK_ROWS], d[a : a + _BLOCK_ROWS])
+        return p
+    lines = [name, "version=3"]
+    lines += [f"nRows={t.shape[0]}", f"nColumns={len(labels) + 1}"]
+    lines.append(f"inDegrees={'yes' if in_degrees else 'no'}")
+    lines.append(f"DataType={data_type or 'double'}")
     lines.append("endheader")
     lines.append("\t".join(["time", *labels]))
-    if quat:
-        cell = ",".join(["%.10g"] * 4)
-        fmt = "\t".join(["%.10g", *([cell] * len(labels))])
-        flat = d.reshape(t.shape[0], -1)
-    else:
-        fmt = "\t".join(["%.10g"] * (len(labels) + 1))
-        flat = d
+    fmt = "\t".join(["%.10g"] * (len(labels) + 1))
     # written block by block (bounded memory for hour-long tables); one C-level format
     # per row instead of one Python f-string per value (imu run spent 60 % writing)
     with open(p, "w") as f:
         f.write("\n".join(lines) + "\n")
         for a in range(0, t.shape[0], _BLOCK_ROWS):
             b = min(t.shape[0], a + _BLOCK_ROWS)
-            rows = np.column_stack([t[a:b], flat[a:b]]).tolist()
+            rows = np.column_stack([t[a:b], d[a:b]]).tolist()
             f.write("\n".join([fmt % tuple(r) for r in rows]) + "\n")
     return p
 
