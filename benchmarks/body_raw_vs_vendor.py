@@ -95,11 +95,15 @@ def main() -> None:
         "every source of the qmt recording) the headings are aligned from the held pose "
         "(heading_alignment=pose; an earlier version used the shared option there, which "
         "gave 29 deg on qmt and 13.5 on x-IMU3 6D); '6d joints' keeps them aligned "
-        "afterwards through the joints (the default of body angles in 6D). On qmt that "
-        "brings our raw samples to 3.3 deg of the vendor's orientations (from 15.1 with "
-        "the pose alone: the arms' headings drifted apart); on the x-IMU3's 18 s the hips, "
-        "whose joint the pelvis sensor does not show clearly, are not followed, so "
-        "hip_rotation_l stays 20 deg off.\n\n" + "\n".join(lines)
+        "afterwards through the joints (the default of body angles in 6D; there the hinge "
+        "calibration is used, which the vendor's side, 6D worlds aligned at the pose only, "
+        "does not: part of the qmt difference); '9d joints' the same on 9D samples (not the "
+        "default). On qmt that brings our raw samples to ~4 deg of the vendor's orientations "
+        "(from 15.1 with the pose alone: the arms' headings drifted apart); on the x-IMU3's "
+        "18 s the hips, whose joint the pelvis sensor does not show clearly, are not "
+        "followed, so hip rotation stays 15-20 deg off. OpenSense's Xsens export is not in "
+        "the table: it has no gyroscope columns, so no filter can run on it (its reader says "
+        "so, naming the sensor).\n\n" + "\n".join(lines)
     )
     print(text)
     if args.write_docs:
