@@ -185,47 +185,75 @@ def _parse_block_fast(block: list[str], k: int, quat: bool) -> tuple[FloatArray,
 
 
 def read_table(path: str | Path) -> OpenSimTable:
-    """Read a ``.mot``/``.sto`` file (numeric or quaternion columns)."""
+    """Read a ``.mot``/``.sto`` file (numeric or quaternion columns). The rows are read
+    and parsed ``_BLOCK_ROWS`` at a time (an hour-long table never sits in memory as
+    text)."""
     p = Path(path)
     try:
-        text = p.read_text()
+        with open(p, encoding="utf-8") as f:
+            return _read_table(p, f)
     except UnicodeDecodeError as exc:
         raise FileFormatError(f"{p}: not a text file ({exc})") from exc
-    lines = text.splitlines()
-    try:
-        end = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader")
-    except StopIteration:
-        raise FileFormatError(
-            f"{p}: no 'endheader' line; is this an OpenSim .mot/.sto file?"
-        ) from None
+
+
+def _read_table(p: Path, f: Any) -> OpenSimTable:
+    import itertools
+
     header: dict[str, str] = {}
-    for line in lines[:end]:
+    for line in f:
+        if line.strip().lower() == "endheader":
+            break
         if "=" in line:
             key, value = line.split("=", 1)
             header[key.strip()] = value.strip()
-    if end + 1 >= len(lines):
+    else:
+        raise FileFormatError(f"{p}: no 'endheader' line; is this an OpenSim .mot/.sto file?")
+    label_line = next(f, None)
+    if label_line is None:
         raise FileFormatError(f"{p}: no column labels after 'endheader'")
-    labels = lines[end + 1].split("\t")
+    labels = label_line.rstrip("\r\n").split("\t")
     if labels[0].strip().lower() != "time":
         raise FileFormatError(f"{p}: first column must be 'time', got {labels[0]!r}")
-    block = [line for line in lines[end + 2 :] if line.strip()]
-    first = block[0].split("\t") if block else []
-    quat = header.get("DataType", "").lower() == "quaternion" or bool(
-        len(first) > 1 and "," in first[1]
-    )
-    n, k = len(block), len(labels) - 1
-    fast = _parse_block_fast(block, k, quat)
-    if fast is not None:
-        in_deg = header.get("inDegrees", "no").lower() == "yes"
-        return OpenSimTable(
-            fast[0], [s.strip() for s in labels[1:]], fast[1], in_degrees=in_deg, header=header
-        )
-    rows = [line.split("\t") for line in block]
+    k = len(labels) - 1
+    quat: bool | None = None
+    times: list[FloatArray] = []
+    datas: list[FloatArray] = []
+    row0 = 0
+    while True:
+        block = [ln.rstrip("\r\n") for ln in itertools.islice(f, _BLOCK_ROWS)]
+        if not block:
+            break
+        block = [ln for ln in block if ln.strip()]
+        if not block:
+            continue
+        if quat is None:
+            first = block[0].split("\t")
+            quat = header.get("DataType", "").lower() == "quaternion" or bool(
+                len(first) > 1 and "," in first[1]
+            )
+        parsed = _parse_block_fast(block, k, quat) or _parse_block_checked(p, block, k, quat, row0)
+        times.append(parsed[0])
+        datas.append(parsed[1])
+        row0 += len(block)
+    shape = (0, k, 4) if quat else (0, k)
+    time = np.concatenate(times) if times else np.empty(0)
+    data = np.concatenate(datas) if datas else np.empty(shape)
+    in_deg = header.get("inDegrees", "no").lower() == "yes"
+    return OpenSimTable(time, [s.strip() for s in labels[1:]], data, in_degrees=in_deg,
+                        header=header)  # fmt: skip
+
+
+def _parse_block_checked(
+    p: Path, block: list[str], k: int, quat: bool, row0: int
+) -> tuple[FloatArray, FloatArray]:
+    """The rows one by one, naming the first bad one (``row0``: rows before the block)."""
+    n = len(block)
     time = np.empty(n)
     data = np.empty((n, k, 4)) if quat else np.empty((n, k))
-    for i, cells in enumerate(rows):
+    for i, line in enumerate(block):
+        cells = line.split("\t")
         if len(cells) != k + 1:
-            raise FileFormatError(f"{p}: row {i} has {len(cells)} cells, expected {k + 1}")
+            raise FileFormatError(f"{p}: row {row0 + i} has {len(cells)} cells, expected {k + 1}")
         try:
             time[i] = float(cells[0])
             if quat:
@@ -233,8 +261,5 @@ def read_table(path: str | Path) -> OpenSimTable:
             else:
                 data[i] = [float(c) for c in cells[1:]]
         except ValueError as exc:
-            raise FileFormatError(f"{p}: row {i}: {exc}") from exc
-    in_deg = header.get("inDegrees", "no").lower() == "yes"
-    return OpenSimTable(
-        time, [s.strip() for s in labels[1:]], data, in_degrees=in_deg, header=header
-    )
+            raise FileFormatError(f"{p}: row {row0 + i}: {exc}") from exc
+    return time, data
