@@ -203,7 +203,7 @@ def plan(
 
 def _up_to_date(src: str, out: str, out_fs: Any) -> bool:
     if out_fs is not None:
-        return bool(out_fs.exists(out_fs._strip_protocol(out)))
+        return bool(out_fs.exists(_fsspec().core.url_to_fs(out)[1]))
     o = Path(out)
     if is_url(src):
         return o.exists()

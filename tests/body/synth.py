@@ -66,3 +66,23 @@ def sensor_orientations(
             q = quat_mul(quat_from_rotvec([0.0, 0.0, sensor_yaw[i]]), q)
         out[s.sensor] = OrientationSeries(time, q, name=s.sensor)
     return out
+
+
+def write_walk_mot(path, duration_s: float, still_s: float, speed: float = 1.2):  # type: ignore[no-untyped-def]
+    """A synthetic full-body walk as a .mot (joint angles of ``full_body_15`` from
+    :func:`mocapkit.body.simulate.gait_coordinates`, the pelvis standing ``still_s`` and
+    then walking forward at ``speed`` [m/s], 0.93 m up); returns the written path."""
+    from mocapkit.body.simulate import gait_coordinates
+    from mocapkit.io.joint_angles_mot import write_joint_angles_mot
+
+    tree = SensorTree.preset("full_body_15")
+    t, coords, _ = gait_coordinates(tree, duration_s=duration_s, still_s=still_s)
+    coords = dict(coords)
+    coords["pelvis_tx"] = speed * np.clip(t - still_s, 0, None)
+    coords["pelvis_ty"] = np.full_like(t, 0.93)
+    coords["pelvis_tz"] = np.zeros_like(t)
+    names = tuple(coords)
+    values = np.column_stack([coords[n] for n in names])
+    from mocapkit.series import JointAngleSeries
+
+    return write_joint_angles_mot(path, JointAngleSeries(t, names, values))

@@ -96,24 +96,13 @@ def test_batch_retarget_passes_the_robot_through_args(tmp_path: Path, capsys) ->
     """``mocapkit batch retarget DIR -o OUT --args '--robot g1'``: every joint-angle file
     onto G1, one CSV each, the options reaching the single-file command."""
     pytest.importorskip("proxsuite", reason="the robots extra")
-    import numpy as np
 
-    from mocapkit.body.sensor_tree import SensorTree
-    from mocapkit.body.simulate import gait_coordinates
-    from mocapkit.io.joint_angles_mot import write_joint_angles_mot
-    from mocapkit.series import JointAngleSeries
+    from tests.body.synth import write_walk_mot
 
     src = tmp_path / "in"
     src.mkdir()
-    tree = SensorTree.preset("full_body_15")
     for k, speed in enumerate((0.8, 1.2)):
-        t, coords, _ = gait_coordinates(tree, duration_s=2.0, still_s=0.5)
-        coords = dict(coords)
-        coords.update(pelvis_tx=speed * np.clip(t - 0.5, 0, None), pelvis_ty=np.full_like(t, 0.93),
-                      pelvis_tz=np.zeros_like(t))  # fmt: skip
-        names = tuple(coords)
-        values = np.column_stack([coords[n] for n in names])
-        write_joint_angles_mot(src / f"walk{k}.mot", JointAngleSeries(t, names, values))
+        write_walk_mot(src / f"walk{k}.mot", duration_s=2.0, still_s=0.5, speed=speed)
     out = tmp_path / "out"
     code = main(["batch", "retarget", str(src), "-o", str(out), "--args", "--robot g1", "--json"])
     report = json.loads(capsys.readouterr().out)

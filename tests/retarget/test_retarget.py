@@ -229,20 +229,11 @@ def test_hull_distance_never_exceeds_the_mesh_distance(g1):
 
 
 def test_cli_retarget_writes_a_trajectory_and_reports(tmp_path):
-    from mocapkit.io.joint_angles_mot import write_joint_angles_mot
-    from mocapkit.series import JointAngleSeries
+    from mocapkit.io.joint_angles_mot import read_joint_angles_mot
+    from tests.body.synth import write_walk_mot
 
-    tree = SensorTree.preset("full_body_15")
-    t, coords, _ = gait_coordinates(tree, duration_s=3.0, still_s=1.0)
-    coords = dict(coords)
-    coords["pelvis_tx"] = 1.2 * np.clip(t - 1.0, 0, None)
-    coords["pelvis_ty"] = np.full_like(t, 0.93)
-    coords["pelvis_tz"] = np.zeros_like(t)
-    names = tuple(coords)
-    mot = write_joint_angles_mot(
-        tmp_path / "walk.mot",
-        JointAngleSeries(t, names, np.column_stack([coords[n] for n in names])),
-    )
+    mot = write_walk_mot(tmp_path / "walk.mot", duration_s=3.0, still_s=1.0)
+    t = read_joint_angles_mot(mot).time
     out = tmp_path / "g1.csv"
     p = subprocess.run(
         [sys.executable, "-m", "mocapkit", "retarget", str(mot), "--robot", "g1", "-o", str(out),

@@ -10,8 +10,6 @@ from typing import Any
 import numpy as np
 import pytest
 
-from mocapkit.body.sensor_tree import SensorTree
-from mocapkit.body.simulate import gait_coordinates
 from mocapkit.errors import ConfigError
 from tests.viz.browser import chromium, color_pixels, free_port, png_rgb, save_artifact
 from tests.viz.test_viewer_browser import _FIND_BUTTON, _wait
@@ -29,21 +27,11 @@ __all__ = ["chromium"]
 @pytest.fixture(scope="module")
 def walk_files(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """A synthetic walk as a .mot and its G1 retargeting as an .npz."""
-    from mocapkit.io.joint_angles_mot import write_joint_angles_mot
     from mocapkit.retarget.run import retarget, write_trajectory
-    from mocapkit.series import JointAngleSeries
+    from tests.body.synth import write_walk_mot
 
     d = tmp_path_factory.mktemp("view")
-    tree = SensorTree.preset("full_body_15")
-    t, coords, _ = gait_coordinates(tree, duration_s=4.0, still_s=1.0)
-    coords = dict(coords)
-    coords["pelvis_tx"] = 1.2 * np.clip(t - 1.0, 0, None)
-    coords["pelvis_ty"] = np.full_like(t, 0.93)
-    coords["pelvis_tz"] = np.zeros_like(t)
-    names = tuple(coords)
-    mot = write_joint_angles_mot(
-        d / "walk.mot", JointAngleSeries(t, names, np.column_stack([coords[n] for n in names]))
-    )
+    mot = write_walk_mot(d / "walk.mot", duration_s=4.0, still_s=1.0)
     npz = write_trajectory(d / "walk_g1.npz", retarget(mot, "g1"))
     return Path(mot), Path(npz)
 

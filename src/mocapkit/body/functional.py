@@ -28,7 +28,7 @@ a usable functional axis (pelvis, trunk) are calibrated from the pose at heading
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -74,7 +74,8 @@ MIN_AXIS_FROM_UP_DEG = 45.0
 # A joint's relative rotation counts as a hinge's when this share of its energy is about
 # one axis (simulated walking: knees 0.99, ankles 0.98, elbows 0.85-0.88 with the
 # forearm's pronation beside the flexion; the 15-IMU recording's walks: knees 0.84-0.87,
-# elbows 0.82-0.89; its sit-down alone: knees 0.71-0.84).
+# elbows 0.82-0.89; its sit-down alone: knees 0.71-0.84). Set while looking at those
+# runs, which docs/benchmarks.md also reports: there is no held-out set of recordings yet.
 HINGE_MIN_SHARE = 0.8
 # A two-axis joint's first axis (elbow, ankle flexion) is at least this far from the
 # parent segment's long axis (anatomically ~90 deg).
@@ -145,10 +146,10 @@ def hinge_axes(
 
     (Searching the relative heading of two unrelated 6D worlds for the most hinge-like
     motion was tried and dropped: on the x-IMU3 recording it turned a knee by 86 deg.)"""
-    rp = quat_to_matrix(q_parent[use])
-    rc = quat_to_matrix(q_child[use])
-    wp = _central(np.einsum("nij,nj->ni", quat_to_matrix(q_parent), rate_p))[use]  # world
-    wc = _central(np.einsum("nij,nj->ni", quat_to_matrix(q_child), rate_c))[use]
+    rp_all, rc_all = quat_to_matrix(q_parent), quat_to_matrix(q_child)
+    rp, rc = rp_all[use], rc_all[use]
+    wp = _central(np.einsum("nij,nj->ni", rp_all, rate_p))[use]  # world rates
+    wc = _central(np.einsum("nij,nj->ni", rc_all, rate_c))[use]
     w = np.einsum("nji,nj->ni", rp, wc - wp)  # relative rate in the parent's frame
     axis_p, energy, _ = dominant_axis(w, smooth=smooth)
     if not np.isfinite(axis_p).all():
@@ -255,11 +256,12 @@ def _plane_normal_fit(v: FloatArray, w: FloatArray, smooth: int = 1) -> FloatArr
     return j / np.linalg.norm(j)
 
 
-def horizontal_rate(series: OrientationSeries) -> FloatArray:
+def horizontal_rate(series: OrientationSeries, rate: FloatArray | None = None) -> FloatArray:
     """(N, 3) angular rate in the sensor frame [rad/s] without its component about the
     world's vertical: turning on the spot rotates every segment about the vertical and
-    would otherwise hide the flexion axis (uses the inclination only, no heading)."""
-    rate = angular_rate(series)
+    would otherwise hide the flexion axis (uses the inclination only, no heading).
+    ``rate``: the series' :func:`angular_rate`, when already computed."""
+    rate = angular_rate(series) if rate is None else rate
     up = quat_rotate(quat_conj(series.quat), np.array([0.0, 0.0, 1.0]))
     return rate - np.sum(rate * up, axis=1, keepdims=True) * up
 
@@ -342,6 +344,14 @@ def calibrate_functional(
     coords = pose_coordinates(tree, pose)
     q_ground_seg = compose_pose(tree, coords)
     e_x, e_y, e_z = np.eye(3)
+    rates: dict[str, FloatArray] = {}
+
+    def rate_of(sensor: str) -> FloatArray:
+        """A sensor's angular rate, computed once (each hinge reads two sensors')."""
+        if sensor not in rates:
+            rates[sensor] = angular_rate(orientations[sensor])
+        return rates[sensor]
+
     q_cal: dict[str, FloatArray] = {}
     cand: dict[str, tuple[FloatArray, float]] = {}
     diag: dict[str, dict[str, float]] = {}
@@ -355,14 +365,16 @@ def calibrate_functional(
             continue
         use = _motion_mask(s, idx, motion_window)
         smooth = max(1, round(SMOOTH_S / float(np.median(np.diff(s.time)))))
-        axis, share, n_used = dominant_axis(horizontal_rate(s)[use], smooth=smooth)
+        axis, share, n_used = dominant_axis(horizontal_rate(s, rate_of(seg.sensor))[use],
+                                            smooth=smooth)  # fmt: skip
         d["functional_share"] = share
         d["functional_samples"] = float(n_used)
         options = [(axis, flexion_axis_in_segment(tree, q_ground_seg, i), share, 0.0)]
         # the sensors' worlds must agree to compare them across a joint
         hinge = None
         if heading_alignment != "pose":
-            hinge = _best_hinge(tree, orientations, i, q_ground_seg, use, smooth, q_cal)
+            hinge = _best_hinge(tree, orientations, i, q_ground_seg, use, smooth, q_cal,
+                                rate_of)  # fmt: skip
         if hinge is not None:  # a hinge's axis is fixed in the segment: preferred
             options.insert(0, (*hinge, 1.0))
         up_sensor = quat_rotate(quat_conj(q_cal[seg.sensor]), e_z)
@@ -475,6 +487,7 @@ def _best_hinge(
     use: np.ndarray,
     smooth: int,
     q_still: Mapping[str, FloatArray],
+    rate_of: Callable[[str], FloatArray],
 ) -> tuple[FloatArray, FloatArray, float] | None:
     """Segment i's flexion axis from the hinges it takes part in (its own joint seen from
     its side, its children's joints seen from its side): (axis in its sensor's frame, the
@@ -483,7 +496,7 @@ def _best_hinge(
     on different clocks)."""
     seg = tree.segments[i]
     me = orientations[seg.sensor]
-    rate_me = angular_rate(me)
+    rate_me = rate_of(seg.sensor)
     options: list[tuple[int, FloatArray, FloatArray, float]] = []
     parents = tree.parent_index
     pairs = [(int(parents[i]), i)] if parents[i] >= 0 else []
@@ -495,7 +508,7 @@ def _best_hinge(
         other = orientations[tree.segments[c if p == i else p].sensor]
         if other.n_samples != me.n_samples or not np.array_equal(other.time, me.time):
             continue
-        rate_other = angular_rate(other)
+        rate_other = rate_of(tree.segments[c if p == i else p].sensor)
         qp, qc = (me.quat, other.quat) if p == i else (other.quat, me.quat)
         rp, rc = (rate_me, rate_other) if p == i else (rate_other, rate_me)
         ok = use & np.isfinite(qp).all(axis=1) & np.isfinite(qc).all(axis=1)

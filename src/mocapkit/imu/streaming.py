@@ -60,7 +60,10 @@ def run_csv_streaming(
             if filt is None:
                 check_units(piece)  # a gyroscope in deg/s shows in the first piece
                 if piece.n_samples < 2:
-                    raise ConfigError(f"{path}: a first piece of {piece.n_samples} row(s)")
+                    raise ConfigError(
+                        f"{path}: {piece.n_samples} data row: at least 2 are needed to know "
+                        "the sampling rate"
+                    )
                 filt = make_filter(filter_name, piece.rate_hz, **(params or {}))
                 t0 = float(piece.time[0])
                 steps = np.concatenate([[filt.params.dt], np.diff(piece.time)])

@@ -21,7 +21,61 @@ log = logging.getLogger("mocapkit.teleop.link")
 KEEPALIVE_S = 0.5
 
 
-class RobotLink:
+class ReportedRobot:
+    """What every robot link shares: the latest report, its age, the reported end-effector
+    pose, waiting for a first report, and use as a context manager. A subclass sets
+    ``latest``/``latest_t`` in ``poll`` and says whether its reports carry a pose."""
+
+    reports_pose = True
+    latest: proto.Report | None
+    latest_t: float
+
+    def __init__(self) -> None:
+        self.latest = None
+        self.latest_t = -np.inf
+        self._pose = np.eye(4)
+        self._pose_of: proto.Report | None = None
+
+    def poll(self) -> int:  # pragma: no cover (every link has its own)
+        raise NotImplementedError
+
+    def close(self) -> None:  # pragma: no cover
+        raise NotImplementedError
+
+    def robot_pose(self) -> FloatArray | None:
+        """The latest reported pose T_base_ee (4, 4), or None. Computed once per report
+        into one buffer: copy it to keep it."""
+        latest = self.latest
+        if latest is None or not self.reports_pose:
+            return None
+        if self._pose_of is not latest:
+            if not np.isfinite(latest.quat).all() or not latest.quat.any():
+                return None  # a report with a broken pose: as good as none
+            _kernels.pose_from_parts(latest.pos, latest.quat, self._pose)
+            self._pose_of = latest
+        return self._pose
+
+    def report_age(self, now: float | None = None) -> float:
+        """Seconds since the latest report (inf when none)."""
+        return (time.monotonic() if now is None else now) - self.latest_t
+
+    def wait_for_report(self, timeout_s: float = 5.0) -> bool:
+        """Poll until a report arrives, sending nothing."""
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            if self.poll():
+                return True
+            time.sleep(0.005)
+        return False
+
+    def __enter__(self) -> Any:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class RobotLink(ReportedRobot):
     """A UDP client of the robot server (loopback or LAN), non-blocking; with ``key`` every
     datagram is signed and every report checked (:func:`~mocapkit.teleop.protocol.sign`).
 
@@ -36,30 +90,21 @@ class RobotLink:
         on_report: Callable[[float, proto.Report], None] | None = None,
         key: bytes | None = None,
     ) -> None:
+        super().__init__()
         self.address = address
         self.key = key
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
         self.sock.connect(address)
         self.seq = 0
-        self.latest: proto.Report | None = None
-        self.latest_t = -np.inf
         self.on_report = on_report
         self.malformed = 0
         self.send_errors = 0
         self._quat = np.empty(4)
-        self._pose = np.eye(4)
-        self._pose_of: proto.Report | None = None
         self._last_ping = -np.inf
 
     def close(self) -> None:
         self.sock.close()
-
-    def __enter__(self) -> RobotLink:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     def _send(self, data: bytes) -> bool:
         if self.key is not None:
@@ -131,29 +176,7 @@ class RobotLink:
         self.send_hold()
         return True
 
-    def robot_pose(self) -> FloatArray | None:
-        """The latest reported pose T_base_ee (4, 4), or None. Computed once per report
-        into one buffer: copy it to keep it."""
-        latest = self.latest
-        if latest is None:
-            return None
-        if self._pose_of is not latest:
-            if not np.isfinite(latest.quat).all() or not latest.quat.any():
-                return None  # a report with a broken pose: as good as none
-            _kernels.pose_from_parts(latest.pos, latest.quat, self._pose)
-            self._pose_of = latest
-        return self._pose
-
-    def report_age(self, now: float | None = None) -> float:
-        """Seconds since the latest report (inf when none)."""
-        return (time.monotonic() if now is None else now) - self.latest_t
-
     def wait_for_report(self, timeout_s: float = 5.0) -> bool:
         """Send nothing, poll until a report arrives (the server reports to its last
         sender, so send a HOLD first if it has never heard from us)."""
-        end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            if self.poll():
-                return True
-            time.sleep(0.005)
-        return False
+        return super().wait_for_report(timeout_s)

@@ -38,6 +38,7 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.errors import ConfigError
 from mocapkit.teleop import protocol as proto
+from mocapkit.teleop.link import ReportedRobot
 
 log = logging.getLogger("mocapkit.teleop.ros2_link")
 
@@ -46,7 +47,7 @@ POSE_STATE_TOPIC = "/current_pose"
 STATE_TOPIC = "/joint_states"
 
 
-class Ros2RobotLink:
+class Ros2RobotLink(ReportedRobot):
     """See the module docstring.
 
     Args:
@@ -73,7 +74,9 @@ class Ros2RobotLink:
     ) -> None:
         from mocapkit.io.ros2_zenoh import Ros2ZenohPublisher
 
+        super().__init__()
         self.pose_topic = pose_topic
+        self.reports_pose = pose_topic is not None
         self.frame_id = frame_id
         self.joint_names = [] if pose_topic is not None else list(joint_names)
         order = list(controller_joints) if controller_joints is not None else self.joint_names
@@ -89,8 +92,6 @@ class Ros2RobotLink:
         self.address = f"ROS 2 {command_topic} / {state_topic} over Zenoh"
         self.on_report = on_report
         self.seq = 0
-        self.latest: proto.Report | None = None
-        self.latest_t = -np.inf
         self.malformed = 0
         self.send_errors = 0
         self._incoming: tuple[float, FloatArray] | None = None
@@ -99,7 +100,6 @@ class Ros2RobotLink:
         self._warned = False
         self.pub = Ros2ZenohPublisher(connect=connect, domain_id=domain_id)
         self._pose_in: tuple[FloatArray, FloatArray] = (np.zeros(3), np.array([1.0, 0, 0, 0]))
-        self._pose_m = np.eye(4)
         if pose_topic is not None:
             self.address = f"ROS 2 {pose_topic} / {pose_state_topic} over Zenoh"
             self.pub.subscribe(pose_state_topic, "geometry_msgs/msg/PoseStamped", self._on_pose)
@@ -200,35 +200,8 @@ class Ros2RobotLink:
     def keepalive(self, now: float | None = None) -> bool:
         return False  # the robot publishes its joint states whether we speak or not
 
-    def robot_pose(self) -> FloatArray | None:
-        """The latest reported end-effector pose (4, 4) (pose mode), else None."""
-        if self.pose_topic is None or self.latest is None:
-            return None
-        from mocapkit.geometry import quat_to_matrix
-
-        self._pose_m[:3, :3] = quat_to_matrix(self.latest.quat)
-        self._pose_m[:3, 3] = self.latest.pos
-        return self._pose_m
-
-    def report_age(self, now: float | None = None) -> float:
-        return (time.monotonic() if now is None else now) - self.latest_t
-
-    def wait_for_report(self, timeout_s: float = 5.0) -> bool:
-        end = time.monotonic() + timeout_s
-        while time.monotonic() < end:
-            if self.poll():
-                return True
-            time.sleep(0.005)
-        return False
-
     def close(self) -> None:
         self.pub.close()
-
-    def __enter__(self) -> Ros2RobotLink:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 __all__ = ["COMMAND_TOPIC", "POSE_STATE_TOPIC", "STATE_TOPIC", "Ros2RobotLink"]
