@@ -54,6 +54,12 @@ class SelfCollision:
         self.radius = np.array([float(o.geometry.aabb_radius) for o in objs])
         self.centre = np.array([np.asarray(o.geometry.aabb_center) for o in objs])
         parents = [int(o.parentJoint) for o in objs]
+        # each sphere's centre in its joint's frame: the sphere pass reads the joints'
+        # placements (one array) instead of every body's (36 Python calls on G1)
+        self._centre_in_joint = np.array(
+            [np.asarray(o.placement.act(self.centre[i])) for i, o in enumerate(objs)]
+        )
+        self._parent = np.array(parents, dtype=np.int64)
         gm.addAllCollisionPairs()
         data = model.createData()
         gd = gm.createData()
@@ -103,17 +109,27 @@ class SelfCollision:
         import pinocchio as pin
 
         pin.updateGeometryPlacements(self.robot.model, self.data, self.gm, self.gd)
-        return self._candidates_placed(margin)
+        return self._candidates_placed(margin, self.data)
 
-    def _candidates_placed(self, margin: float) -> np.ndarray:
-        """Pairs whose bounding spheres come within ``margin`` (placements in ``self.gd``
-        already updated), the closest first."""
-        pl = self.gd.oMg
-        c = np.array([pl[i].act(self.centre[i]) for i in range(len(self.radius))])
-        a, b = self.pairs[:, 0], self.pairs[:, 1]
-        gap = np.linalg.norm(c[a] - c[b], axis=1) - self.radius[a] - self.radius[b]
-        close = np.flatnonzero(gap < margin)
-        return close[np.argsort(gap[close])]  # the closest first
+    def _candidates_placed(self, margin: float, data: Any) -> np.ndarray:
+        """Pairs whose bounding spheres come within ``margin`` with the joint placements in
+        ``data`` (forward kinematics done), the closest first."""
+        return self._close_pairs(self.data, self.pairs, np.arange(len(self.pairs)), margin)
+
+    def _close_pairs(
+        self, data: Any, pairs: np.ndarray, index: np.ndarray, margin: float
+    ) -> np.ndarray:
+        """``index`` (of ``pairs``, rows of ``self.pairs``) whose bounding spheres come within
+        ``margin`` with the joint placements in ``data``, the closest first."""
+        h = np.array([m.homogeneous for m in data.oMi])[self._parent]
+        c = np.einsum("kij,kj->ki", h[:, :3, :3], self._centre_in_joint) + h[:, :3, 3]
+        a, b = pairs[:, 0], pairs[:, 1]
+        d = c.take(a, 0) - c.take(b, 0)  # (take: ~3x faster than fancy indexing here)
+        reach = self.radius.take(a) + self.radius.take(b) + margin
+        d2 = np.einsum("ij,ij->i", d, d)
+        close = np.flatnonzero(d2 < reach * reach)
+        gap = np.sqrt(d2[close]) - reach[close]
+        return index[close[np.argsort(gap)]]  # the closest first
 
     def _build_hulls(self) -> None:
         """The same bodies as convex hulls (Qhull, through coal), tested with a 2 mm margin
@@ -219,7 +235,8 @@ class HullAvoidance:
         pin.updateGeometryPlacements(robot.model, self.data, coll.hm, self.hd)
         self.floor = np.full(len(coll.pairs), MIN_DISTANCE)
         self.on_mesh = np.zeros(len(coll.pairs), dtype=bool)
-        for k in coll._candidates_placed(MIN_DISTANCE):  # only these can be nearer at rest
+        # only these can be nearer than the floor at rest
+        for k in coll._candidates_placed(MIN_DISTANCE, self.data):
             d_ref = pin.computeDistance(coll.hm, self.hd, int(k)).min_distance
             if d_ref < 0.0:  # hulls overlapping at rest (concave bodies side by side) say
                 self.on_mesh[k] = True  # nothing of the meshes: measure those on the meshes
@@ -230,29 +247,29 @@ class HullAvoidance:
     def rows(
         self, q: FloatArray, pairs: list[int] | None = None, data: Any = None
     ) -> tuple[FloatArray, FloatArray]:
-        """(C (MAX_ROWS, nv), u (MAX_ROWS,)) with ``C dq <= u``; unused rows are zero with a
-        huge bound. A pair nearer than its floor must move apart (by at most
-        ``RECOVER_PER_STEP`` a step). ``pairs``: only these (indices into the checked
-        pairs), else every pair near enough. ``data``: the caller's Pinocchio data with
-        the joint placements and Jacobians of ``q`` already computed (the QP's), else they
-        are computed here."""
+        """(C (m, nv), u (m,)) with ``C dq <= u``, one row for each of the at most
+        ``MAX_ROWS`` nearest pairs within reach (m may be 0). A pair nearer than its floor
+        must move apart (by at most ``RECOVER_PER_STEP`` a step). ``pairs``: only these
+        (indices into the checked pairs), else every pair near enough. ``data``: the
+        caller's Pinocchio data with the joint placements and Jacobians of ``q`` already
+        computed (the QP's), else they are computed here."""
         import pinocchio as pin
 
         coll = self.coll
         robot = coll.robot
         nv = robot.model.nv
-        c_out = np.zeros((MAX_ROWS, nv))
-        u_out = np.full(MAX_ROWS, 1e20)
         if not self.available:
-            return c_out, u_out
+            return np.zeros((0, nv)), np.zeros(0)
         d = self.data if data is None else data
         if data is None:
             pin.computeJointJacobians(robot.model, d, q)  # and the joint placements
-        pin.updateGeometryPlacements(robot.model, d, coll.gm, coll.gd)
-        cand = (coll._candidates_placed(ACTIVE_DISTANCE + MIN_DISTANCE) if pairs is None
+        reach = ACTIVE_DISTANCE + MIN_DISTANCE  # no row beyond: slack >= sphere gap - floor
+        cand = (coll._candidates_placed(reach, d) if pairs is None
                 else np.asarray(pairs, dtype=np.int64))  # fmt: skip
         if not len(cand):
-            return c_out, u_out
+            return np.zeros((0, nv)), np.zeros(0)
+        if self.on_mesh[cand].any():
+            pin.updateGeometryPlacements(robot.model, d, coll.gm, coll.gd)
         pin.updateGeometryPlacements(robot.model, d, coll.hm, self.hd)
         near = []
         for k in cand:
@@ -263,11 +280,10 @@ class HullAvoidance:
             if slack < ACTIVE_DISTANCE:
                 near.append((slack, int(k), res))
         near.sort(key=lambda x: x[0])
-        if not near:
-            return c_out, u_out
         lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         objs = coll.pairs
-        for i, (slack, k, res) in enumerate(near[:MAX_ROWS]):
+        c_out, u_out = [], []
+        for slack, k, res in near[:MAX_ROWS]:
             a, b = (int(x) for x in objs[k])
             pa = np.asarray(res.getNearestPoint1())
             pb = np.asarray(res.getNearestPoint2())
@@ -282,9 +298,11 @@ class HullAvoidance:
             row = n @ (ja - jb)  # the distance shrinks at n . (v_a - v_b)
             if float(np.linalg.norm(row)) < 1e-2:
                 continue
-            c_out[i] = row
-            u_out[i] = max(float(slack), -RECOVER_PER_STEP)
-        return c_out, u_out
+            c_out.append(row)
+            u_out.append(max(float(slack), -RECOVER_PER_STEP))
+        if not c_out:
+            return np.zeros((0, nv)), np.zeros(0)
+        return np.array(c_out), np.array(u_out)
 
     def _point_jacobian(self, d: Any, joint: int, point: FloatArray, frame: object) -> FloatArray:
         import pinocchio as pin

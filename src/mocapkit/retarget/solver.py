@@ -93,6 +93,9 @@ class FrameSolver:
         self.q_last: FloatArray | None = None
         self.anchors: dict[str, tuple[FloatArray, FloatArray]] = {}
         self.kp = [(k, robot.frame_ids[k.frame]) for k in robot.spec.keypoints]
+        self._kp_weights = [(k, fid, np.sqrt(k.position), np.sqrt(k.orientation))
+                            for k, fid in self.kp]  # fmt: skip
+        self._kp_rows = sum(3 * (k.position > 0) + 3 * (k.orientation > 0) for k, _ in self.kp)
         self.q_pred = self.q.copy()  # constant-velocity prediction of this frame
         self.foot_ref = {f.segment: robot.ref_pose[f.frame][1] for f in robot.spec.feet}
         self.feet = [(f, robot.frame_ids[f.frame]) for f in robot.spec.feet]
@@ -100,39 +103,45 @@ class FrameSolver:
         self.dt = float(np.median(dt)) if dt.size else 0.01
 
     def _tasks(self, k: int) -> tuple[FloatArray, FloatArray]:
-        """Stacked weighted rows (A, b) with cost |A dq - b|^2."""
+        """Stacked weighted rows (A, b) with cost |A dq - b|^2 (written into one array:
+        this runs twice a frame and its small allocations were a tenth of the frame)."""
         import pinocchio as pin
 
         m, d = self.robot.model, self.robot.data
         lwa = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-        rows, rhs = [], []
         t = self.targets
-        for kp, fid in self.kp:
-            oMf = d.oMf[fid]
-            jac = pin.getFrameJacobian(m, d, fid, lwa)
-            if kp.position > 0:
-                w = np.sqrt(kp.position)
-                rows.append(w * jac[:3])
-                rhs.append(w * (t.pos[kp.segment][k] - oMf.translation))
-            if kp.orientation > 0:
-                w = np.sqrt(kp.orientation)
-                rows.append(w * jac[3:])
-                rhs.append(w * _log3(t.rot[kp.segment][k] @ oMf.rotation.T))
-        for foot, fid in self.feet:
+        contact = [(f, fid) for f, fid in self.feet if t.contact[f.segment][k]]
+        for foot, _ in self.feet:
             if not t.contact[foot.segment][k]:
                 self.anchors.pop(foot.segment, None)
-                continue
+        n_rows = self._kp_rows + 6 * len(contact)
+        a = np.empty((n_rows, self.nv))
+        b = np.empty(n_rows)
+        r = 0
+        for kp, fid, w_pos, w_rot in self._kp_weights:
+            oMf = d.oMf[fid]
+            jac = pin.getFrameJacobian(m, d, fid, lwa)
+            if w_pos > 0:
+                a[r : r + 3] = w_pos * jac[:3]
+                b[r : r + 3] = w_pos * (t.pos[kp.segment][k] - oMf.translation)
+                r += 3
+            if w_rot > 0:
+                a[r : r + 3] = w_rot * jac[3:]
+                b[r : r + 3] = w_rot * _log3(t.rot[kp.segment][k] @ oMf.rotation.T)
+                r += 3
+        w = np.sqrt(CONTACT_WEIGHT)
+        for foot, fid in contact:
             oMf = d.oMf[fid]
             if foot.segment not in self.anchors:  # touch-down: hold here, flat
                 p = np.array(oMf.translation)
-                r = np.array(oMf.rotation)
-                self.anchors[foot.segment] = (p, self._flat(r, foot.segment))
+                rot = np.array(oMf.rotation)
+                self.anchors[foot.segment] = (p, self._flat(rot, foot.segment))
             p_a, r_a = self.anchors[foot.segment]
-            jac = pin.getFrameJacobian(m, d, fid, lwa)
-            w = np.sqrt(CONTACT_WEIGHT)
-            rows.append(w * jac)
-            rhs.append(w * np.concatenate([p_a - oMf.translation, _log3(r_a @ oMf.rotation.T)]))
-        return np.vstack(rows), np.concatenate(rhs)
+            a[r : r + 6] = w * pin.getFrameJacobian(m, d, fid, lwa)
+            b[r : r + 3] = w * (p_a - oMf.translation)
+            b[r + 3 : r + 6] = w * _log3(r_a @ oMf.rotation.T)
+            r += 6
+        return a, b
 
     def step(self, k: int) -> FloatArray:
         import pinocchio as pin
@@ -144,9 +153,11 @@ class FrameSolver:
         self.n_steps += 1
         # pairs the guard had to part lately keep rows in the QP (hard) for a while
         self.watched = {p: t for p, t in self.watched.items() if t >= self.n_steps}
-        watched = sorted(self.watched) if self.watched and self.avoid is None else None
-        avoid = self._rows if watched else self.avoid
         for _ in range(FIRST_ITERATIONS if first else ITERATIONS):
+            # (looked up each iteration: on the first frame, a pair parted by the guard
+            # gets its rows from the next iteration on instead of colliding again)
+            watched = sorted(self.watched) if self.watched and self.avoid is None else None
+            avoid = self._rows if watched else self.avoid
             q_before = self.q.copy()
             dq = self._iteration(k, first, q_start, avoid, hard=bool(watched), pairs=watched)
             if dq is None:  # not even the joints' bounds and the ground together: hold
@@ -194,6 +205,8 @@ class FrameSolver:
         c, u = self._ground()
         if avoid is not None:
             ca, ua = avoid.rows(self.q, pairs, d)  # d: this q's placements and Jacobians
+            if not len(ua):  # no pair within reach
+                return self._solve_qp(h, g, c, u, lo, hi)
             if hard:  # the rows as constraints; soft when no step meets them all
                 x = self._solve_qp(h, g, np.vstack([c, ca]), np.concatenate([u, ua]), lo, hi)
                 if x is not None:
