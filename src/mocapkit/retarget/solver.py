@@ -44,7 +44,15 @@ VELOCITY_SHARE = 0.99
 AVOID_WEIGHT = 1e4  # cost of a metre of slack on an avoidance row, squared
 GIVE_WAY_M = 0.005  # m: slack beyond this on an avoidance row is reported
 GUARD_BISECTIONS = 6  # halvings of a colliding step (1/64 of it)
-GUARD_ROWS_STEPS = 50  # after the guard acts, the avoidance rows stay in the QP this long
+# The first frame's iterations stop once one moves no joint further than this [rad], or
+# once the guard has parted bodies FIRST_PARTED times on it: pressed against a body, every
+# further iteration collides again and is bisected back on the meshes (G1's start on the
+# gait2392 TRC: 29 times, 168 ms of its 0.3 s). (Giving the parted pair avoidance rows from
+# the next iteration on was tried: 20 ms there, but Talos then started walking2 in a pose
+# that stopped 249 of its frames short.)
+FIRST_SETTLED_RAD = 1e-3
+FIRST_PARTED = 3
+GUARD_ROWS_STEPS = 50
 
 
 @dataclass
@@ -58,6 +66,13 @@ class Solution:
     held_frames: list[int] = field(default_factory=list)
     kept_apart: list[int] = field(default_factory=list)  # steered round a collision
     stopped: list[int] = field(default_factory=list)  # stopped short to keep bodies apart
+
+
+def _moved(model: Any, q0: FloatArray, q1: FloatArray) -> float:
+    """The largest joint (or base coordinate) motion from ``q0`` to ``q1``."""
+    import pinocchio as pin
+
+    return float(np.max(np.abs(pin.difference(model, q0, q1)), initial=0.0))
 
 
 def _log3(r: FloatArray) -> FloatArray:
@@ -153,11 +168,10 @@ class FrameSolver:
         self.n_steps += 1
         # pairs the guard had to part lately keep rows in the QP (hard) for a while
         self.watched = {p: t for p, t in self.watched.items() if t >= self.n_steps}
+        watched = sorted(self.watched) if self.watched and self.avoid is None else None
+        avoid = self._rows if watched else self.avoid
+        parted = 0  # the guard's steps on the first frame
         for _ in range(FIRST_ITERATIONS if first else ITERATIONS):
-            # (looked up each iteration: on the first frame, a pair parted by the guard
-            # gets its rows from the next iteration on instead of colliding again)
-            watched = sorted(self.watched) if self.watched and self.avoid is None else None
-            avoid = self._rows if watched else self.avoid
             q_before = self.q.copy()
             dq = self._iteration(k, first, q_start, avoid, hard=bool(watched), pairs=watched)
             if dq is None:  # not even the joints' bounds and the ground together: hold
@@ -166,6 +180,10 @@ class FrameSolver:
             self._advance(dq)
             if first and self._collides():  # the start pose is reached through free space
                 self._keep_apart(k, first, q_before, q_start)
+                parted += 1
+            settled = first and _moved(m, q_before, self.q) < FIRST_SETTLED_RAD
+            if settled or parted >= FIRST_PARTED:
+                break  # at rest, or pressed against a body the guard keeps it from
         if not first and self._collides():
             self._keep_apart(k, first, q_start, q_start)
         step = (
