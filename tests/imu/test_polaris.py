@@ -2,12 +2,20 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from mocapkit.errors import ConfigError, DataError, ShapeError
 from mocapkit.geometry import quat_from_axis_angle
-from mocapkit.imu.filters import Polaris, PolarisParams, make_filter, polaris_offline
+from mocapkit.imu.filters import (
+    Polaris,
+    PolarisParams,
+    make_filter,
+    polaris_offline,
+    polaris_offline_chunks,
+)
 from mocapkit.imu.filters.polaris_timing import estimate_mag_delay
 from mocapkit.imu.metrics import error_quat_world, heading_error, inclination_error, total_error
 
@@ -282,25 +290,43 @@ def test_reset_and_reset_heading() -> None:
     np.testing.assert_array_equal(f.run(s.gyr, s.acc, s.mag), first)
 
 
-def test_offline_fused_kernels_equal_the_numpy_steps(monkeypatch: pytest.MonkeyPatch) -> None:
+def _validated(f: Polaris, gyr: np.ndarray, acc: np.ndarray, mag: np.ndarray | None) -> tuple:
+    inputs, _ = f._prepare(gyr, acc, mag, None)
+    return (inputs.gyr, inputs.acc, inputs.mag, inputs.dt, inputs.use_acc, inputs.use_mag,
+            mag is not None)  # fmt: skip
+
+
+def test_offline_pieces_equal_the_numpy_steps(tmp_path: Path) -> None:
     # Upside down the low-passed vertical is antiparallel to up at the start (the fused
     # inclination kernel leaves that to numpy); zero-norm accelerometer rows are
-    # interpolated; the fused kernels follow numpy's arithmetic, so equal to the bit.
+    # interpolated (here across a piece boundary, and at both ends); the kernels follow
+    # numpy's arithmetic and carry their state from piece to piece, so equal to the bit
+    # in one piece in memory, and in pieces of 97 samples on disk.
     s = make_synthetic(20.0, RATE, q0=quat_from_axis_angle([1.0, 0.0, 0.0], np.pi))
     acc = s.acc.copy()
-    acc[300:320] = 0.0
+    acc[:3] = 0.0
+    acc[290:320] = 0.0
+    acc[-2:] = 0.0
     for mag in (s.mag, None):
-        fused = Polaris(rate_hz=RATE).smooth(s.gyr, acc, mag)
-        with monkeypatch.context() as m:
-            m.setattr(
-                polaris_offline,
-                "_tail_fast",
-                lambda *args: polaris_offline._tail_numpy(*args[:2], "fast", *args[2:]),
-            )
-            steps = Polaris(rate_hz=RATE).smooth(s.gyr, acc, mag)
-        np.testing.assert_array_equal(fused.q6, steps.q6)
-        np.testing.assert_array_equal(fused.bias, steps.bias)
-        if mag is not None:
-            assert fused.q9 is not None
-            assert steps.q9 is not None
-            np.testing.assert_array_equal(fused.q9, steps.q9)
+        f = Polaris(rate_hz=RATE)
+        args = _validated(f, s.gyr, acc, mag)
+        fused = polaris_offline.smooth(f.params, "fast", *args)
+        steps = polaris_offline.smooth_steps(f.params, "fast", *args)
+        gyr, acc_v, mag_v, dt, use_acc, use_mag, has_mag = args
+        store = polaris_offline_chunks.DiskStore(tmp_path)
+        for name, x in (("gyr", gyr), ("acc", acc_v), ("mag", mag_v), ("dt", dt)):
+            for a in range(0, len(dt), 500):  # written in other pieces than read
+                store.write(name, a, x[a : a + 500])
+        pieces = list(polaris_offline_chunks.smooth_pieces(
+            f.params, store, len(dt), use_acc, use_mag, has_mag, 97))  # fmt: skip
+        store.close()
+        assert [p.start for p in pieces] == list(range(0, len(dt), 97))
+        assert not list(tmp_path.iterdir())  # the store's files are gone
+        for result in (fused, steps):
+            np.testing.assert_array_equal(np.concatenate([p.q6 for p in pieces]), result.q6)
+            np.testing.assert_array_equal(np.concatenate([p.bias for p in pieces]), result.bias)
+            if mag is not None:
+                assert result.q9 is not None
+                np.testing.assert_array_equal(
+                    np.concatenate([p.q9 for p in pieces if p.q9 is not None]), result.q9
+                )

@@ -10,8 +10,10 @@ import numpy as np
 import pytest
 
 from mocapkit.cli.main import main
+from mocapkit.errors import ConfigError
 from mocapkit.imu.filters import make_filter
-from mocapkit.imu.streaming import run_csv_streaming
+from mocapkit.imu.filters.base import recording_steps
+from mocapkit.imu.streaming import run_csv_offline, run_csv_streaming
 from mocapkit.io.imu_csv import iter_imu_csv, read_imu_csv, write_imu_csv
 from mocapkit.io.opensim_table import read_table
 from mocapkit.series import ImuRecording
@@ -27,6 +29,7 @@ def _recording(path: Path, n: int = 5000, lost: bool = True) -> ImuRecording:
     keep = np.ones(n, dtype=bool)
     if lost:
         keep[2003:2007] = False  # lost packets inside a piece
+        keep[2104:2106] = False  # and before the first row of a piece of 700 (row 2100)
     rec = ImuRecording(t[keep], gyr[keep], acc[keep], mag[keep], name="left shank")
     write_imu_csv(path, rec)
     return read_imu_csv(path)  # as written (the CSV's precision)
@@ -87,7 +90,57 @@ def test_imu_run_streams_a_csv(tmp_path: Path, capsys: pytest.CaptureFixture[str
     rate = next(iter_imu_csv(src)).rate_hz
     whole = make_filter("polaris", rate).run_recording(rec)
     np.testing.assert_allclose(data[:, 1:5], whole.quat, atol=1e-9)
-    # the whole-recording path (offline) still takes the file whole
+    # offline: smoothed piece by piece through files on disk
     assert main(["imu", "run", str(src), "--filter", "polaris", "--offline", "-o",
                  str(tmp_path / "f.sto"), "--json"]) == 0  # fmt: skip
-    assert "streamed" not in json.loads(capsys.readouterr().out)
+    report = json.loads(capsys.readouterr().out)
+    assert report["streamed"] is True
+    assert report["offline"] is True
+    filt = make_filter("polaris", rate)
+    smoothed = filt.run_offline(rec.gyr, rec.acc, rec.mag, dt=recording_steps(rec, filt.params.dt))
+    np.testing.assert_allclose(read_table(tmp_path / "f.sto").data[:, 0], smoothed, atol=1e-9)
+
+
+@pytest.mark.parametrize("mode", ["9d", "6d"])
+def test_offline_pieces_on_disk_give_the_whole_smoother(tmp_path: Path, mode: str) -> None:
+    src = tmp_path / "s.csv"
+    rec = _recording(src)
+    rate = next(iter_imu_csv(src, chunk_rows=700)).rate_hz
+    filt = make_filter("polaris", rate)
+    whole = filt.run_offline(rec.gyr, rec.acc, rec.mag if mode == "9d" else None,
+                             dt=recording_steps(rec, filt.params.dt))  # fmt: skip
+    out = tmp_path / "o.sto"
+    work = tmp_path / "work"
+    work.mkdir()
+    rep = run_csv_offline(src, "polaris", out, mode=mode, chunk_rows=700, workdir=work)
+    assert (rep.chunks, rep.rows) == (8, rec.n_samples)
+    assert not list(work.iterdir())  # the temporary files are gone
+    table = read_table(out)
+    np.testing.assert_allclose(table.time, rec.time - rec.time[0], atol=1e-9)
+    # 1e-9: the table's 10 significant digits; the pieces themselves are exact
+    np.testing.assert_allclose(table.data[:, 0, :], whole, atol=1e-9)
+
+
+def test_offline_needs_a_filter_with_an_offline_mode(tmp_path: Path) -> None:
+    src = tmp_path / "s.csv"
+    _recording(src, n=300, lost=False)
+    with pytest.raises(ConfigError, match="has no offline mode"):
+        run_csv_offline(src, "bachmann", tmp_path / "o.sto", workdir=tmp_path)
+    assert [p.name for p in tmp_path.iterdir()] == ["s.csv"]
+
+
+def test_lost_samples_at_a_batch_start_are_integrated_as_in_one_run(tmp_path: Path) -> None:
+    # live, samples come one by one: a step over lost packets is then always the first
+    # of its batch, and takes the previous batch's last reading (the trapezoidal rule)
+    rec = _recording(tmp_path / "s.csv", n=2400)
+    steps = recording_steps(rec, 0.01)
+    assert steps is not None
+    assert (steps[2090:2110] > 0.015).any()  # lost packets in the one-by-one part
+    whole = make_filter("polaris", 100.0).run(rec.gyr, rec.acc, rec.mag, dt=steps)
+    f = make_filter("polaris", 100.0)
+    parts = [f.run(rec.gyr[:2090], rec.acc[:2090], rec.mag[:2090], dt=steps[:2090])]
+    for i in range(2090, 2110):
+        parts.append(f.run(rec.gyr[i : i + 1], rec.acc[i : i + 1], rec.mag[i : i + 1],
+                           dt=steps[i : i + 1]))  # fmt: skip
+    parts.append(f.run(rec.gyr[2110:], rec.acc[2110:], rec.mag[2110:], dt=steps[2110:]))
+    np.testing.assert_allclose(np.concatenate(parts), whole, atol=1e-12)

@@ -318,23 +318,24 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _streams(args: argparse.Namespace) -> bool:
-    """One mocapkit IMU CSV run online: read, filtered and written piece by piece."""
+    """One mocapkit IMU CSV: read, filtered and written piece by piece (online), or read
+    and smoothed piece by piece through files on disk (offline)."""
     path = Path(args.path)
     return (
         path.is_file()
         and path.suffix.lower() == ".csv"
         and args.filter_name != DEVICE
-        and not args.offline
         and not args.remove_gyr_bias
         and not args.sensor
     )
 
 
 def _run_streamed(args: argparse.Namespace) -> int:
-    from mocapkit.imu.streaming import run_csv_streaming
+    from mocapkit.imu.streaming import run_csv_offline, run_csv_streaming
 
-    rep = run_csv_streaming(Path(args.path), args.filter_name, args.output, mode=args.mode,
-                            params=dict(args.param))  # fmt: skip
+    run = run_csv_offline if args.offline else run_csv_streaming
+    rep = run(Path(args.path), args.filter_name, args.output, mode=args.mode,
+              params=dict(args.param))  # fmt: skip
     if rep.mag_gaps or rep.acc_rejected or rep.mag_rejected:
         print(
             f"{rep.sensor}: {rep.mag_gaps} magnetometer gaps and {rep.mag_rejected} rejected "
@@ -346,7 +347,7 @@ def _run_streamed(args: argparse.Namespace) -> int:
     if args.json:
         print_json(
             {"output": str(args.output), "rows": rep.rows, "sensors": [label],
-             "filter": args.filter_name, "mode": args.mode, "offline": False,
+             "filter": args.filter_name, "mode": args.mode, "offline": args.offline,
              "streamed": True, "chunks": rep.chunks}
         )  # fmt: skip
     return EXIT_OK

@@ -8,6 +8,11 @@ object (its state carried from piece to piece: the result equals one run over th
 recording), and its orientations are appended to the output table at once. Everything
 else (several sensors on their own clocks, the offline smoother, device orientations,
 bias removal from a rest period) reads the whole recording first.
+
+Offline (``--offline``, polaris) the CSV is read the same way and its validated samples
+go to files in a temporary directory (:func:`run_csv_offline`); the smoother's passes then
+run over those files piece by piece (:mod:`mocapkit.imu.filters.polaris_offline_chunks`,
+the same numbers as in memory), and each smoothed piece is appended to the table.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from mocapkit.errors import ConfigError
+from mocapkit.errors import ConfigError, DataError
 from mocapkit.io.imu_csv import CHUNK_ROWS, iter_imu_csv
 from mocapkit.io.opensim_table import QuaternionTableWriter
 
@@ -90,4 +95,110 @@ def run_csv_streaming(
     return report
 
 
-__all__ = ["StreamReport", "run_csv_streaming"]
+def run_csv_offline(
+    path: Path,
+    filter_name: str,
+    output: Path,
+    *,
+    mode: str = "9d",
+    params: dict[str, Any] | None = None,
+    chunk_rows: int = CHUNK_ROWS,
+    workdir: str | Path | None = None,
+) -> StreamReport:
+    """A mocapkit IMU CSV through the offline smoother (polaris, forward-backward) into an
+    orientation table in bounded memory (module docstring): ``chunk_rows`` samples in
+    memory at a time, ~300 bytes a sample on disk in ``workdir`` (default
+    :func:`~mocapkit.imu.filters.polaris_offline_chunks.default_workdir`) while it runs."""
+    import tempfile
+
+    from mocapkit.imu.filters.polaris_offline_chunks import (
+        DiskStore,
+        default_workdir,
+        smooth_pieces,
+    )
+
+    report = StreamReport()
+    with tempfile.TemporaryDirectory(prefix="mocapkit-smooth-",
+                                     dir=workdir or default_workdir()) as tmp:  # fmt: skip
+        store = DiskStore(tmp)
+        try:
+            filt, use_acc, use_mag, rate = _spill_csv(path, filter_name, mode, params,
+                                                      chunk_rows, store, report)  # fmt: skip
+            n = report.rows
+            label = "_".join(report.sensor.split())
+            t0 = float(store.read("time", 0, 1)[0, 0])
+            with QuaternionTableWriter(output, [label], rate, path.stem) as writer:
+                for piece in smooth_pieces(filt.params, store, n, use_acc, use_mag,
+                                           mode == "9d", chunk_rows):  # fmt: skip
+                    q = piece.q9 if piece.q9 is not None else piece.q6
+                    bad = ~np.isfinite(q).all(axis=1)
+                    if bad.any():  # a kernel bug must never reach the user as NaN
+                        raise DataError(
+                            f"polaris: non-finite orientation at sample "
+                            f"{piece.start + int(np.flatnonzero(bad)[0])}; this is a bug, "
+                            "please report it with the input"
+                        )
+                    t = store.read("time", piece.start, piece.stop)[:, 0] - t0
+                    writer.write(t, q[:, None, :])
+                    report.chunks += 1
+        finally:
+            store.close()
+    return report
+
+
+def _spill_csv(
+    path: Path, filter_name: str, mode: str, params: dict[str, Any] | None, chunk_rows: int,
+    store: Any, report: StreamReport,
+) -> tuple[Any, np.ndarray, np.ndarray, float]:  # fmt: skip
+    """Read the CSV piece by piece, validate each piece as the filter would (with the
+    previous piece's last gyroscope reading), and write the validated samples and their
+    time to ``store``. Returns the filter, the accelerometer and magnetometer flags (N,)
+    and the rate [Hz]."""
+    from mocapkit.imu.evaluation import check_offline
+    from mocapkit.imu.filters import make_filter
+    from mocapkit.io.imu_files import check_units
+
+    filt: Any = None
+    flags_acc: list[np.ndarray] = []
+    flags_mag: list[np.ndarray] = []
+    last_gyr: np.ndarray | None = None
+    rate = 0.0
+    t_last = 0.0
+    for piece in iter_imu_csv(path, chunk_rows=chunk_rows):
+        if filt is None:
+            check_units(piece)
+            if piece.n_samples < 2:
+                raise ConfigError(
+                    f"{path}: {piece.n_samples} data row: at least 2 are needed to know "
+                    "the sampling rate"
+                )
+            filt = check_offline(make_filter(filter_name, piece.rate_hz, **(params or {})),
+                                 filter_name)  # fmt: skip
+            rate = piece.rate_hz
+            report.sensor = piece.name
+            steps = np.concatenate([[filt.params.dt], np.diff(piece.time)])
+            report.time_span = (float(piece.time[0]), 0.0)
+        else:
+            steps = np.concatenate([[piece.time[0] - t_last], np.diff(piece.time)])
+        mag = piece.mag if mode == "9d" else None
+        # the previous piece's last reading: a step over lost samples at this piece's start
+        # is integrated as in one run
+        inputs, rep = filt._prepare(piece.gyr, piece.acc, mag, steps, last_gyr)
+        a = report.rows
+        for name in ("gyr", "acc", "mag", "dt"):
+            store.write(name, a, getattr(inputs, name))
+        store.write("time", a, piece.time)
+        flags_acc.append(inputs.use_acc.copy())
+        flags_mag.append(inputs.use_mag.copy())
+        report.acc_rejected += rep.acc_rejected
+        report.mag_gaps += rep.mag_gaps
+        report.mag_rejected += rep.mag_rejected
+        last_gyr = piece.gyr[-1].copy()
+        t_last = float(piece.time[-1])
+        report.rows += piece.n_samples
+    assert filt is not None  # iter_imu_csv yields at least one piece or raises
+    report.time_span = (report.time_span[0], t_last)
+    return filt, np.concatenate(flags_acc), np.concatenate(flags_mag), rate
+
+
+__all__ = ["StreamReport", "run_csv_offline", "run_csv_streaming"]

@@ -172,11 +172,15 @@ class FilterState:
         initialised: False until the first samples (or :meth:`OrientationFilter.reset`
             with a quaternion, or :meth:`OrientationFilter.reinitialize`) set ``quat``.
         dip: magnetic dip [rad] measured at initialisation (NaN until known).
+        last_gyr: (3,) the last gyroscope reading [rad/s] (None before the first): a step
+            over lost samples at the start of the next batch is integrated with it (the
+            trapezoidal rule), as in one run over both batches.
     """
 
     quat: FloatArray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0, 0.0]))
     initialised: bool = False
     dip: float = float("nan")
+    last_gyr: FloatArray | None = None
 
 
 class OrientationFilter(ABC):
@@ -294,11 +298,12 @@ class OrientationFilter(ABC):
             mag: (N, 3) magnetic field (any unit) or None (6D). All-NaN rows are gaps.
             dt: time step [s] per sample, scalar or (N,); ``params.dt`` when None.
         """
-        inputs, report = self._prepare(gyr, acc, mag, dt)
+        inputs, report = self._prepare(gyr, acc, mag, dt, self.state.last_gyr)
         n = inputs.gyr.shape[0]
         if n == 0:
             self.last_report = report
             return np.zeros((0, 4))
+        last_gyr = np.array(as_float_array(gyr, "gyr").reshape(-1, 3)[-1])
         initialised_here = False
         if not self.state.initialised:
             self._initialise_from(inputs)
@@ -306,6 +311,7 @@ class OrientationFilter(ABC):
         elif mag is not None and not np.isfinite(self.state.dip):
             self._measure_dip(inputs)
         out = self._run_fast(inputs) if self.backend == "fast" else self._run_reference(inputs)
+        self.state.last_gyr = last_gyr
         if not np.isfinite(out).all():  # a kernel bug must never reach the user as NaN
             i = int(np.flatnonzero(~np.isfinite(out).all(axis=1))[0])
             raise DataError(f"{self.name}: non-finite orientation at sample {i}; please report")
@@ -320,11 +326,13 @@ class OrientationFilter(ABC):
         )
         return out
 
-    def _prepare(self, gyr: Any, acc: Any, mag: Any, dt: Any) -> tuple[FilterInputs, RunReport]:
+    def _prepare(
+        self, gyr: Any, acc: Any, mag: Any, dt: Any, last_gyr: FloatArray | None = None
+    ) -> tuple[FilterInputs, RunReport]:
         p = self.params
         return prepare_inputs(
             gyr, acc, mag, dt, p.dt, p.acc_range, p.gyr_range, p.gap_factor,
-            p.max_integrated_gap_s,
+            p.max_integrated_gap_s, last_gyr,
         )  # fmt: skip
 
     def _initialise_from(self, inputs: FilterInputs) -> None:

@@ -167,11 +167,13 @@ def prepare_inputs(
     gyr_range: float | None = None,
     gap_factor: float = math.inf,
     integrate_s: float = 0.0,
+    last_gyr: FloatArray | None = None,
 ) -> tuple[FilterInputs, RunReport]:
     """Validate a batch and build the kernels' inputs and the report (see base.py's
     module docstring for every case). ``default_dt`` [s] is used when ``dt`` is None;
     ``acc_range`` [m/s^2] and ``gyr_range`` [rad/s] are the full-scale ranges or None;
-    a step longer than ``gap_factor`` nominal steps is a gap (:func:`hold_time_gaps`).
+    a step longer than ``gap_factor`` nominal steps is a gap (:func:`hold_time_gaps`);
+    ``last_gyr`` (3,) is the reading before the batch (a previous batch's last), if any.
 
     A clean batch takes one numba pass (:mod:`mocapkit.imu.filters.inputs_kernel`);
     anything doubtful takes the numpy checks below, which raise or warn naming the sample.
@@ -183,7 +185,7 @@ def prepare_inputs(
     if not math.isfinite(gap_factor) or inputs.dt.size == 0:
         return fast
     steps, gap, gaps = hold_time_gaps(inputs.dt, default_dt, gap_factor, integrate_s)
-    inputs = _trapezoid_over_lost_samples(inputs, default_dt, gap)
+    inputs = _trapezoid_over_lost_samples(inputs, default_dt, gap, last_gyr)
     if not gaps:
         return inputs, report
     inputs = inputs._replace(dt=np.ascontiguousarray(steps), gap=gap)
@@ -191,21 +193,29 @@ def prepare_inputs(
 
 
 def _trapezoid_over_lost_samples(
-    inputs: FilterInputs, default_dt: float, held: np.ndarray
+    inputs: FilterInputs, default_dt: float, held: np.ndarray, last_gyr: FloatArray | None
 ) -> FilterInputs:
     """A step over lost samples (longer than ``LOST_STEP_FACTOR`` nominal ones, integrated,
     not held) turns the sensor at the mean of the readings either side of it instead of
     the later one alone: the trapezoidal rule, causal (both are known once the later one
     arrives). A foot swinging at 7 rad/s through 80 ms of lost packets turns ~30 deg; the
-    later reading alone gets that wrong by as much as the rate changed."""
+    later reading alone gets that wrong by as much as the rate changed. The first sample
+    takes ``last_gyr`` (the previous batch's last reading) as the one before it: a live
+    session fed sample by sample integrates lost packets as one run over the recording."""
     long = inputs.dt > LOST_STEP_FACTOR * default_dt
-    long[0] = False
+    before = None if last_gyr is None else np.asarray(last_gyr, dtype=float).reshape(3)
+    if before is None or not np.isfinite(before).all():
+        long[0] = False
     long &= ~held
     if not long.any():
         return inputs
     idx = np.flatnonzero(long)
     gyr = inputs.gyr.copy()
-    gyr[idx] = 0.5 * (inputs.gyr[idx - 1] + inputs.gyr[idx])
+    prev = np.empty((idx.size, 3))
+    inner = idx > 0
+    prev[inner] = inputs.gyr[idx[inner] - 1]
+    prev[~inner] = before
+    gyr[idx] = 0.5 * (prev + inputs.gyr[idx])
     return inputs._replace(gyr=np.ascontiguousarray(gyr))
 
 

@@ -39,12 +39,7 @@ from mocapkit.imu.filters.polaris_engine import (
     start,
     strapdown,
 )
-from mocapkit.imu.filters.polaris_offline_kernels import (
-    heading_fusion_kernel,
-    inclination_kernel,
-    smoothed_strapdown_kernel,
-    zero_phase_kernel,
-)
+from mocapkit.imu.filters.polaris_offline_chunks import RamStore, smooth_pieces
 from mocapkit.imu.filters.polaris_params import PolarisCore, PolarisParams, butterworth2
 
 _UP = np.array([0.0, 0.0, 1.0])
@@ -129,7 +124,31 @@ def smooth(
     use_mag: np.ndarray,
     has_mag: bool,
 ) -> OfflineResult:
-    """The offline estimate (O1-O5) of validated (N, 3) arrays; see the module docstring."""
+    """The offline estimate (O1-O5) of validated (N, 3) arrays; see the module docstring.
+    The fast backend runs the steps of :mod:`mocapkit.imu.filters.polaris_offline_chunks`
+    over the arrays in memory (one piece); the reference backend the numpy steps below."""
+    n = gyr.shape[0]
+    if backend == "fast":
+        store = RamStore(n, gyr=gyr, acc=acc, mag=mag, dt=dt)
+        (piece,) = smooth_pieces(params, store, n, use_acc, use_mag, has_mag, max(n, 1))
+        return OfflineResult(piece.q6, piece.q9, piece.bias)
+    return smooth_steps(params, backend, gyr, acc, mag, dt, use_acc, use_mag, has_mag)
+
+
+def smooth_steps(
+    params: PolarisParams,
+    backend: str,
+    gyr: FloatArray,
+    acc: FloatArray,
+    mag: FloatArray,
+    dt: FloatArray,
+    use_acc: np.ndarray,
+    use_mag: np.ndarray,
+    has_mag: bool,
+) -> OfflineResult:
+    """:func:`smooth` as numpy steps over whole arrays (the reference backend's path; with
+    ``backend="fast"`` the passes are numba's and the rest numpy: the tests' check that
+    the pieces give the same numbers to the bit)."""
     n = gyr.shape[0]
     c = pp.coefficients(params)
     c[pp.C_MAG_DELAY] = 0.0
@@ -157,10 +176,6 @@ def smooth(
         np.ascontiguousarray(use_mag[::-1]),
         has_mag,
     )
-    if backend == "fast":
-        return _tail_fast(
-            params, c, gyr, acc, mag, dt, dt_b, use_acc, use_mag, has_mag, aux_f, aux_b
-        )
     return _tail_numpy(
         params, c, backend, gyr, acc, mag, dt, dt_b, use_acc, use_mag, has_mag, aux_f, aux_b
     )
@@ -247,41 +262,3 @@ def _heading_passes(
         np.ascontiguousarray(use_mag[::-1]),
     )
     return fwd, bwd
-
-
-def _tail_fast(
-    params: PolarisParams,
-    c: FloatArray,
-    gyr: FloatArray,
-    acc: FloatArray,
-    mag: FloatArray,
-    dt: FloatArray,
-    dt_b: FloatArray,
-    use_acc: np.ndarray,
-    use_mag: np.ndarray,
-    has_mag: bool,
-    aux_f: FloatArray,
-    aux_b: FloatArray,
-) -> OfflineResult:
-    """(O3)-(O5) with the numba kernels of
-    :mod:`mocapkit.imu.filters.polaris_offline_kernels` (the same arithmetic as the numpy
-    steps of :func:`smooth`, fused into a few passes); ``aux_b`` time-reversed."""
-    n = gyr.shape[0]
-    bias = np.empty((n, 3))
-    q_IS = np.empty((n, 4))
-    a_I = np.empty((n, 3))
-    smoothed_strapdown_kernel(gyr, acc, dt, aux_f, aux_b, bias, q_IS, a_I)
-    a_I = np.ascontiguousarray(_fill_unusable(a_I, use_acc))
-    a_I_lp = np.empty_like(a_I)
-    zero_phase_kernel(a_I, *butterworth2(params.offline_tau_acc, params.dt), a_I_lp)
-    q6 = np.empty((n, 4))
-    if not inclination_kernel(a_I_lp, q_IS, q6):  # antiparallel or broken: numpy handles it
-        q6 = quat_mul(quat_from_two_vectors(a_I_lp, np.broadcast_to(_UP, a_I_lp.shape)), q_IS)
-    if not has_mag:
-        return OfflineResult(q6, None, bias)
-    fwd, bwd = _heading_passes(c, "fast", q6, mag, _rate2(gyr, bias), dt, dt_b, use_mag)
-    gap = bwd[::-1, 0] - fwd[:, 0]
-    diff = np.arctan2(np.sin(gap), np.cos(gap))
-    q9 = np.empty((n, 4))
-    heading_fusion_kernel(q6, fwd, bwd, diff, q9)
-    return OfflineResult(q6, q9, bias)

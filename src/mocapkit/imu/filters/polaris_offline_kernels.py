@@ -98,23 +98,24 @@ def smoothed_strapdown_kernel(
     dt: np.ndarray,
     aux_f: np.ndarray,
     aux_b: np.ndarray,
+    q: np.ndarray,
     bias: np.ndarray,
     q_IS: np.ndarray,
     acc_I: np.ndarray,
 ) -> None:
-    """(O3) and (O4) in one pass: the smoothed bias ``bias`` (N, 3) from the forward aux
-    ``aux_f`` and the *time-reversed* backward aux ``aux_b`` (N, 8), the strapdown
-    ``q_IS`` (N, 4) with it (:func:`strapdown_kernel`'s arithmetic) and the accelerometer
-    in I, ``acc_I`` (N, 3) (``geometry.quat_rotate``'s arithmetic)."""
+    """(O3) and (O4) in one pass over a piece of the recording: the smoothed bias ``bias``
+    (N, 3) from the forward aux ``aux_f`` and the backward aux ``aux_b`` (N, 8, both in
+    time order), the strapdown ``q_IS`` (N, 4) with it (:func:`strapdown_kernel`'s
+    arithmetic) from ``q`` (4,), the orientation before the piece (updated: the next
+    piece goes on from it), and the accelerometer in I, ``acc_I`` (N, 3)
+    (``geometry.quat_rotate``'s arithmetic)."""
     n = gyr.shape[0]
-    w, x, y, z = 1.0, 0.0, 0.0, 0.0
+    w, x, y, z = q[0], q[1], q[2], q[3]
     for k in range(n):
         var_f = aux_f[k, 7]
-        var_b = aux_b[n - 1 - k, 7]
+        var_b = aux_b[k, 7]
         for i in range(3):
-            bias[k, i] = (aux_f[k, 4 + i] * var_b - aux_b[n - 1 - k, 4 + i] * var_f) / (
-                var_f + var_b
-            )
+            bias[k, i] = (aux_f[k, 4 + i] * var_b - aux_b[k, 4 + i] * var_f) / (var_f + var_b)
         wx = (gyr[k, 0] - bias[k, 0]) * dt[k]
         wy = (gyr[k, 1] - bias[k, 1]) * dt[k]
         wz = (gyr[k, 2] - bias[k, 2]) * dt[k]
@@ -128,36 +129,38 @@ def smoothed_strapdown_kernel(
         acc_I[k, 0] = v0 + w * t0 + (y * t2 - z * t1)
         acc_I[k, 1] = v1 + w * t1 + (z * t0 - x * t2)
         acc_I[k, 2] = v2 + w * t2 + (x * t1 - y * t0)
+    q[0], q[1], q[2], q[3] = w, x, y, z
 
 
 @njit(cache=True)
-def zero_phase_kernel(
-    x: np.ndarray, b0: float, b1: float, b2: float, a1: float, a2: float, out: np.ndarray
+def iir_kernel(
+    x: np.ndarray,
+    b0: float,
+    b1: float,
+    b2: float,
+    a1: float,
+    a2: float,
+    zi: np.ndarray,
+    backward: bool,
+    out: np.ndarray,
 ) -> None:
-    """The Butterworth ``(b0, b1, b2, 1, a1, a2)`` over each column of ``x`` (N, 3) forward,
-    then backward over the result, each started at steady state (``out`` (N, 3)); the
-    arithmetic of ``scipy.signal.lfilter`` (transposed direct form II) with
-    ``zi = [b1 - a1 + b2 - a2, b2 - a2] * first``."""
+    """The Butterworth ``(b0, b1, b2, 1, a1, a2)`` over each column of a piece ``x``
+    (N, 3) into ``out``, forward or ``backward`` (last row first), with the arithmetic of
+    ``scipy.signal.lfilter`` (transposed direct form II); ``zi`` (3, 2) is each column's
+    filter memory before the piece and is updated (the next piece goes on from it). The
+    zero-phase low-pass (O4) is a forward run then a backward run over its output, each
+    started at steady state: ``zi = [b1 - a1 + b2 - a2, b2 - a2] * first value``."""
     n = x.shape[0]
-    if n == 0:
-        return
-    u0 = b1 - a1 + b2 - a2
-    u1 = b2 - a2
     for j in range(x.shape[1]):
-        z0, z1 = u0 * x[0, j], u1 * x[0, j]
-        for k in range(n):
+        z0, z1 = zi[j, 0], zi[j, 1]
+        for i in range(n):
+            k = n - 1 - i if backward else i
             v = x[k, j]
             yk = z0 + b0 * v
             z0 = z1 + v * b1 - yk * a1
             z1 = v * b2 - yk * a2
             out[k, j] = yk
-        z0, z1 = u0 * out[n - 1, j], u1 * out[n - 1, j]
-        for k in range(n - 1, -1, -1):
-            v = out[k, j]
-            yk = z0 + b0 * v
-            z0 = z1 + v * b1 - yk * a1
-            z1 = v * b2 - yk * a2
-            out[k, j] = yk
+        zi[j, 0], zi[j, 1] = z0, z1
 
 
 @njit(cache=True)
@@ -194,14 +197,13 @@ def heading_fusion_kernel(
     q6: np.ndarray, fwd: np.ndarray, bwd: np.ndarray, diff: np.ndarray, q9: np.ndarray
 ) -> None:
     """(O5) ``q9 = Rz(psi) * q6`` (N, 4), ``psi`` the forward heading offset ``fwd``
-    (N, 2) and the *time-reversed* backward one ``bwd`` fused by their variances (a
+    (N, 2) and the backward one ``bwd`` (N, 2, in time order) fused by their variances (a
     direction whose filter has not started yet, variance 0, gets no weight); ``diff`` (N,)
     is backward minus forward wrapped to [-pi, pi] (numpy's ``arctan2``, which differs
     from the C library's in the last bit for some arguments)."""
-    n = q6.shape[0]
-    for k in range(n):
+    for k in range(q6.shape[0]):
         f, var_f = fwd[k, 0], fwd[k, 1]
-        var_b = bwd[n - 1 - k, 1]
+        var_b = bwd[k, 1]
         weight = 0.0
         if var_f > 0.0 and var_b > 0.0:
             weight = var_f / (var_f + var_b)
