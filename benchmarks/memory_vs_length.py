@@ -83,8 +83,9 @@ def main() -> None:
         f"`python -m benchmarks.memory_vs_length{rate_arg}"
         f" --minutes {' '.join(f'{m:g}' for m in args.minutes)}` (one sensor at "
         f"{args.rate:g} Hz, a mocapkit CSV, `mocapkit imu run --filter polaris`, whole "
-        "processes; online streams the CSV in pieces of 100,000 rows, offline reads it "
-        "whole). Peak memory from the shortest to the longest recording: "
+        "processes; both stream the CSV in pieces of 100,000 rows, offline through files "
+        "on disk, ~400 bytes a sample while it runs). Peak memory from the shortest to the "
+        "longest recording: "
         f"{growth} (target: within x2).\n\n" + "\n".join(lines)
     )
     print(text)

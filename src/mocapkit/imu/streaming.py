@@ -6,7 +6,7 @@ piece, whatever the recording's length (issue 16: an hour at 1 kHz).
 (:func:`mocapkit.io.imu_csv.iter_imu_csv`), each piece goes through the same filter
 object (its state carried from piece to piece: the result equals one run over the whole
 recording), and its orientations are appended to the output table at once. Everything
-else (several sensors on their own clocks, the offline smoother, device orientations,
+else (several sensors on their own clocks, device orientations,
 bias removal from a rest period) reads the whole recording first.
 
 Offline (``--offline``, polaris) the CSV is read the same way and its validated samples
@@ -107,7 +107,7 @@ def run_csv_offline(
 ) -> StreamReport:
     """A mocapkit IMU CSV through the offline smoother (polaris, forward-backward) into an
     orientation table in bounded memory (module docstring): ``chunk_rows`` samples in
-    memory at a time, ~300 bytes a sample on disk in ``workdir`` (default
+    memory at a time, ~400 bytes a sample on disk in ``workdir`` (default
     :func:`~mocapkit.imu.filters.polaris_offline_chunks.default_workdir`) while it runs."""
     import tempfile
 

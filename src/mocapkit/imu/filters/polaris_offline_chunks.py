@@ -8,10 +8,10 @@ backward heading filter in reverse order, and the fusions sample by sample. Run 
 piece with the state carried, each gives the same numbers, to the bit, as over the whole
 arrays at once (tested). With a :class:`RamStore` and one piece this *is* the in-memory
 smoother (:func:`mocapkit.imu.filters.polaris_offline.smooth`); with a :class:`DiskStore`
-the recording and the intermediate arrays (~300 bytes a sample) live in files in a
-temporary directory, read and written a piece at a time, so memory is bounded by the
-piece whatever the recording's length (issue 16: an hour at 1 kHz is 3.6 M samples,
-~1.1 GB on disk for the intermediates).
+the recording and the intermediate arrays (51 columns: ~400 bytes a sample) live in
+files in a temporary directory, read and written a piece at a time, so memory is bounded
+by the piece whatever the recording's length (issue 16: an hour at 1 kHz is 3.6 M
+samples, ~1.5 GB on disk while it runs).
 """
 
 from __future__ import annotations
