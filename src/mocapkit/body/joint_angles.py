@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from mocapkit._validate import FloatArray
-from mocapkit.body.sensor_tree import SensorTree
+from mocapkit.body.sensor_tree import SegmentSpec, SensorTree
 from mocapkit.errors import ConfigError, DataError
 from mocapkit.geometry import euler_from_quat, quat_conj, quat_from_euler, quat_mul
 from mocapkit.series import JointAngleSeries, OrientationSeries
@@ -177,19 +177,23 @@ def report_gimbal(
             exact[seg.joint.name] = idx
         if idx.size or n_near:
             first = int(idx[0]) if idx.size else int(np.flatnonzero(near[:, i])[0])
-            order = seg.joint.slots()[0]
-            c = [seg.joint.coordinates[k] for k in order]  # in rotation order
-            logger.warning(
-                "joint %s (segment %s, sensor %s): middle angle %s within %.0f deg of +-90 deg "
-                "(gimbal lock) in %d samples, first at sample %d (t = %.2f s); %s and %s are "
-                "ill-defined there (%d samples exactly locked: the third angle is held). Fix: "
-                "keep the motion away from this posture, or give the joint axes in another "
-                "order so that the singular posture is one the subject never reaches.",
-                seg.joint.name, seg.name, seg.sensor, c[1] or "(unnamed)", NEAR_GIMBAL_DEG,
-                n_near, first, float(time[first]), c[0] or "(unnamed)", c[2] or "(unnamed)",
-                idx.size,
-            )  # fmt: skip
+            log_gimbal(seg, n_near, int(idx.size), first, float(time[first]))
     return exact, close
+
+
+def log_gimbal(seg: SegmentSpec, n_near: int, n_exact: int, first: int, t_first: float) -> None:
+    """The gimbal-lock warning for one joint (``first``: its first sample, at ``t_first``)."""
+    order = seg.joint.slots()[0]
+    c = [seg.joint.coordinates[k] for k in order]  # in rotation order
+    logger.warning(
+        "joint %s (segment %s, sensor %s): middle angle %s within %.0f deg of +-90 deg "
+        "(gimbal lock) in %d samples, first at sample %d (t = %.2f s); %s and %s are "
+        "ill-defined there (%d samples exactly locked: the third angle is held). Fix: "
+        "keep the motion away from this posture, or give the joint axes in another "
+        "order so that the singular posture is one the subject never reaches.",
+        seg.joint.name, seg.name, seg.sensor, c[1] or "(unnamed)", NEAR_GIMBAL_DEG,
+        n_near, first, t_first, c[0] or "(unnamed)", c[2] or "(unnamed)", n_exact,
+    )  # fmt: skip
 
 
 def decompose(

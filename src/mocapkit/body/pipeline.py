@@ -4,7 +4,7 @@ or automatically), then compute segment orientations and joint angles."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -154,27 +154,40 @@ def summary(result: BodyResult) -> dict[str, Any]:
             "missing": int((~good).sum()),
         }
     rate = 1.0 / float(np.median(np.diff(a.time))) if a.n_samples > 1 else None
-    cal = result.calibration
     return {
         "n_frames": a.n_samples,
         "rate_hz": rate,
         "duration_s": float(a.time[-1] - a.time[0]) if a.n_samples else 0.0,
-        "calibration": {
-            "method": cal.method,
-            "heading_deg": float(np.rad2deg(cal.heading_rad)),
-            "window_s": list(cal.window),
-            **{k: v for k, v in cal.diagnostics.items() if not isinstance(v, dict)},
-            # per segment: how still its sensor was in the window, how clearly it showed its
-            # joint's axis, how far its heading sits from the body's (the residuals)
-            "segments": {
-                name: {k: round(float(v), 3) for k, v in seg.diagnostics.items()}
-                for name, seg in cal.segments.items()
-            },
-        },
+        "calibration": calibration_summary(result.calibration),
         "gimbal_lock": {k: int(v.size) for k, v in result.body.gimbal.items()},
         "near_gimbal": dict(result.body.near_gimbal),
         "held": dict(result.body.held),
         "coordinates": coords,
+        **findings_summary(result.calibration_findings, result.implausible),
+    }
+
+
+def calibration_summary(cal: BodyCalibration) -> dict[str, Any]:
+    """The calibration's JSON figures (method, heading, window, per-segment residuals)."""
+    return {
+        "method": cal.method,
+        "heading_deg": float(np.rad2deg(cal.heading_rad)),
+        "window_s": list(cal.window),
+        **{k: v for k, v in cal.diagnostics.items() if not isinstance(v, dict)},
+        # per segment: how still its sensor was in the window, how clearly it showed its
+        # joint's axis, how far its heading sits from the body's (the residuals)
+        "segments": {
+            name: {k: round(float(v), 3) for k, v in seg.diagnostics.items()}
+            for name, seg in cal.segments.items()
+        },
+    }
+
+
+def findings_summary(
+    checks: Sequence[CalibrationFinding], implausible: Sequence[Finding]
+) -> dict[str, Any]:
+    """``calibration_checks`` and ``implausible`` as JSON lists."""
+    return {
         "calibration_checks": [
             {
                 "kind": f.kind,
@@ -183,7 +196,7 @@ def summary(result: BodyResult) -> dict[str, Any]:
                 "value_deg": round(f.value_deg, 1),
                 "message": f.message,
             }
-            for f in result.calibration_findings
+            for f in checks
         ],
         "implausible": [
             {
@@ -194,6 +207,6 @@ def summary(result: BodyResult) -> dict[str, Any]:
                 "worst_deg": round(f.worst_deg, 1),
                 "range_deg": list(f.range_deg),
             }
-            for f in result.implausible
+            for f in implausible
         ],
     }

@@ -81,30 +81,63 @@ def _base(name: str) -> str:
     return name
 
 
+class RangeTally:
+    """Counts, over pieces of a recording, each coordinate's samples outside its range:
+    :meth:`findings` then equals :func:`check_angles` on the whole (the streamed body
+    pipeline checks an hour without holding it)."""
+
+    def __init__(self, tree: SensorTree, names: tuple[str, ...]) -> None:
+        segment_of: dict[str, tuple[str, str]] = {}
+        for seg in tree.segments:
+            for coord in seg.joint.coordinates:
+                if coord is not None:
+                    segment_of[coord] = (seg.name, seg.sensor)
+        # (column, name, range, segment, sensor) of each coordinate with a known range
+        self._checked = [
+            (k, name, RANGES_DEG[_base(name)], *segment_of.get(name, ("?", "?")))
+            for k, name in enumerate(names)
+            if _base(name) in RANGES_DEG
+        ]
+        n = len(self._checked)
+        self._finite = np.zeros(n, dtype=np.int64)
+        self._outside = np.zeros(n, dtype=np.int64)
+        self._worst = np.zeros(n)
+
+    def add(self, values: np.ndarray) -> None:
+        """Joint angles (n, K) [rad], columns in ``names`` order."""
+        for j, (k, _, rng, _, _) in enumerate(self._checked):
+            deg = np.degrees(values[:, k])
+            deg = deg[np.isfinite(deg)]
+            out = deg[(deg < rng[0] - MARGIN_DEG) | (deg > rng[1] + MARGIN_DEG)]
+            self._finite[j] += deg.size
+            self._outside[j] += out.size
+            if out.size:
+                w = float(out[np.argmax(np.abs(out))])
+                if abs(w) > abs(self._worst[j]):
+                    self._worst[j] = w
+
+    def findings(self) -> list[Finding]:
+        found = []
+        for j, (_, name, rng, segment, sensor) in enumerate(self._checked):
+            if self._finite[j] == 0:
+                continue
+            fraction = float(self._outside[j] / self._finite[j])
+            if fraction > OUTSIDE_FRACTION:
+                found.append(Finding(name, segment, sensor, fraction, float(self._worst[j]), rng))
+        return found
+
+
 def check_angles(tree: SensorTree, angles: JointAngleSeries) -> list[Finding]:
     """The coordinates of ``angles`` outside their physiological ranges."""
-    segment_of: dict[str, tuple[str, str]] = {}
-    for seg in tree.segments:
-        for coord in seg.joint.coordinates:
-            if coord is not None:
-                segment_of[coord] = (seg.name, seg.sensor)
-    findings = []
-    for k, name in enumerate(angles.names):
-        rng = RANGES_DEG.get(_base(name))
-        if rng is None:
-            continue
-        deg = np.degrees(angles.values[:, k])
-        deg = deg[np.isfinite(deg)]
-        if deg.size == 0:
-            continue
-        lo, hi = rng[0] - MARGIN_DEG, rng[1] + MARGIN_DEG
-        outside = (deg < lo) | (deg > hi)
-        fraction = float(outside.mean())
-        if fraction <= OUTSIDE_FRACTION:
-            continue
-        worst = float(deg[outside][np.argmax(np.abs(deg[outside]))])
-        segment, sensor = segment_of.get(name, ("?", "?"))
-        findings.append(Finding(name, segment, sensor, fraction, worst, rng))
+    tally = RangeTally(tree, tuple(angles.names))
+    tally.add(angles.values)
+    return tally.findings()
+
+
+def warn_findings(findings: list[Finding]) -> list[Finding]:
+    """Each finding warned (``ImplausibleAnglesWarning``)."""
+    for f in findings:
+        warnings.warn(f.message(), ImplausibleAnglesWarning, stacklevel=3)
     return findings
 
 
@@ -122,6 +155,8 @@ __all__ = [
     "RANGES_DEG",
     "Finding",
     "ImplausibleAnglesWarning",
+    "RangeTally",
     "check_angles",
+    "warn_findings",
     "warn_implausible",
 ]

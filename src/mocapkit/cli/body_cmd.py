@@ -75,12 +75,26 @@ def _cmd_angles(args: argparse.Namespace) -> int:
         tree = tree.with_sensor_names({str(k): str(v) for k, v in mapping.items()})
     if args.map:
         tree = tree.with_sensor_names(_parse_map(args.map))
+    fmt = recording_format(Path(args.recording), args.format)
+    alignment = args.heading_alignment
+    if alignment is None:
+        # 6D: each sensor has its own heading, kept consistent by the joints. 9D and a
+        # device's orientations: one shared heading (joints would also take out the
+        # few degrees between 9D sensors in the closed loop, but on the x-IMU3
+        # recording they move the hips 14 deg from what two 9D filters agree on)
+        alignment = "joints" if (args.filter and args.mode == "6d") else "shared"
+    # an orientation table goes through in pieces (flat memory for an hour); the BVH and
+    # the joint-heading pass need the whole recording
+    streamed = (
+        not args.filter and fmt == "opensense-sto" and not args.bvh
+        and (alignment != "joints" or bool(args.calibration_in))
+    )  # fmt: skip
     raw = None
+    orientations: Any = None
     if args.filter:  # raw samples through our filter; the accelerometers serve the joints
-        fmt = recording_format(Path(args.recording), args.format)
         raw = read_raw(Path(args.recording), fmt)
         orientations = run_filter(raw, args.filter, args.mode)
-    else:
+    elif not streamed:
         orientations = load_orientations(Path(args.recording), args.format)
     placement = load_orientations(Path(args.placement), args.format) if args.placement else None
     heading: HeadingFixed | HeadingFromSensor | None = None
@@ -96,13 +110,6 @@ def _cmd_angles(args: argparse.Namespace) -> int:
     if args.calibration_in:
         calibration = BodyCalibration.from_dict(json.loads(Path(args.calibration_in).read_text()))
     else:
-        alignment = args.heading_alignment
-        if alignment is None:
-            # 6D: each sensor has its own heading, kept consistent by the joints. 9D and a
-            # device's orientations: one shared heading (joints would also take out the
-            # few degrees between 9D sensors in the closed loop, but on the x-IMU3
-            # recording they move the hips 14 deg from what two 9D filters agree on)
-            alignment = "joints" if (args.filter and args.mode == "6d") else "shared"
         if alignment == "joints":
             # aligned at the held pose, kept aligned by the joints
             orientations, joint_info = _joint_headings(tree, orientations, raw)
@@ -111,43 +118,51 @@ def _cmd_angles(args: argparse.Namespace) -> int:
             "heading_alignment": alignment,
             "root_reference": args.root_reference,
         }
-    t0 = time.perf_counter()
-    result = run_body(
-        tree,
-        orientations,
-        calibration=calibration,
-        placement=placement,
-        window=tuple(args.calib_window) if args.calib_window else None,
-        start=args.start,
-        stop=args.stop,
-        dropout=args.dropout,
-        max_hold_s=args.max_hold_s,
+    options: dict[str, Any] = {
+        "calibration": calibration,
+        "placement": placement,
+        "window": tuple(args.calib_window) if args.calib_window else None,
+        "start": args.start,
+        "stop": args.stop,
+        "dropout": args.dropout,
+        "max_hold_s": args.max_hold_s,
         **kwargs,
-    )
-    elapsed = time.perf_counter() - t0
+    }
+    t0 = time.perf_counter()
     outputs = {}
-    if args.output:
-        from mocapkit.io.joint_angles_mot import write_joint_angles_mot
+    if streamed:
+        from mocapkit.body.streamed import stream_body
 
-        outputs["mot"] = str(write_joint_angles_mot(args.output, result.body.angles))
-    if args.bvh:
-        from mocapkit.body.skeleton import bvh_from_segments
-        from mocapkit.io.bvh import write_bvh
+        done = stream_body(tree, args.recording, output=args.output,
+                           segments_output=args.segments, **options)  # fmt: skip
+        report, cal = done.summary, done.calibration
+        outputs.update({"mot": args.output} if args.output else {})
+        outputs.update({"segments": args.segments} if args.segments else {})
+    else:
+        result = run_body(tree, orientations, **options)
+        report, cal = summary(result), result.calibration
+        if args.output:
+            from mocapkit.io.joint_angles_mot import write_joint_angles_mot
 
-        motion = bvh_from_segments(
-            tree, result.segments, result.calibration.q_world_ground,
-            bone_names=_parse_map(args.bone) if args.bone else None,
-        )  # fmt: skip
-        outputs["bvh"] = str(write_bvh(args.bvh, motion))
-    if args.segments:
-        from mocapkit.io.opensense import write_orientations_sto
+            outputs["mot"] = str(write_joint_angles_mot(args.output, result.body.angles))
+        if args.bvh:
+            from mocapkit.body.skeleton import bvh_from_segments
+            from mocapkit.io.bvh import write_bvh
 
-        outputs["segments"] = str(write_orientations_sto(args.segments, result.segments))
+            motion = bvh_from_segments(
+                tree, result.segments, result.calibration.q_world_ground,
+                bone_names=_parse_map(args.bone) if args.bone else None,
+            )  # fmt: skip
+            outputs["bvh"] = str(write_bvh(args.bvh, motion))
+        if args.segments:
+            from mocapkit.io.opensense import write_orientations_sto
+
+            outputs["segments"] = str(write_orientations_sto(args.segments, result.segments))
+    elapsed = time.perf_counter() - t0
     if args.calibration_out:
-        Path(args.calibration_out).write_text(json.dumps(result.calibration.to_dict(), indent=2))
+        Path(args.calibration_out).write_text(json.dumps(cal.to_dict(), indent=2))
         outputs["calibration"] = args.calibration_out
-    report = summary(result)
-    report.update({"tree": tree.name, "outputs": outputs, "seconds": elapsed})
+    report.update({"tree": tree.name, "outputs": outputs, "seconds": elapsed, "streamed": streamed})
     if joint_info is not None:
         import numpy as np
 

@@ -6,10 +6,11 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapkit.io.opensim_table import read_table, write_table
+from mocapkit.io.opensim_table import TableWriter, read_table
 from mocapkit.series import JointAngleSeries
 
 _TRANSLATIONS = ("_tx", "_ty", "_tz")
+_BLOCK_ROWS = 50_000
 
 
 def _rotational(names: tuple[str, ...]) -> np.ndarray:
@@ -20,10 +21,36 @@ def write_joint_angles_mot(path: str | Path, angles: JointAngleSeries) -> Path:
     """Write rotational coordinates [rad] as degrees (``inDegrees=yes``), OpenSim's layout;
     translations (``_tx``, ``_ty``, ``_tz``) stay metres, as OpenSim writes them.
     NaN (unknown) values are written as ``nan``, which OpenSim reads as missing."""
-    values = np.array(angles.values, dtype=float)
-    rot = _rotational(angles.names)
-    values[:, rot] = np.rad2deg(values[:, rot])
-    return write_table(path, angles.time, list(angles.names), values, name=angles.name)
+    with JointAnglesMotWriter(path, angles.names, name=angles.name) as w:
+        for a in range(0, angles.n_samples, _BLOCK_ROWS):
+            w.write(angles.time[a : a + _BLOCK_ROWS], angles.values[a : a + _BLOCK_ROWS])
+    return Path(path)
+
+
+class JointAnglesMotWriter:
+    """:func:`write_joint_angles_mot` as the angles come, row block by row block
+    (the streamed body pipeline writes an hour this way in flat memory)."""
+
+    def __init__(
+        self, path: str | Path, names: tuple[str, ...], *, name: str = "joint_angles"
+    ) -> None:
+        self._rot = _rotational(tuple(names))
+        self._w = TableWriter(path, list(names), name=name, in_degrees=True)
+
+    def write(self, time: np.ndarray, values_rad: np.ndarray) -> None:
+        """Append rows: ``time`` (N,) [s], coordinates (N, K) [rad; translations m]."""
+        values = np.array(values_rad, dtype=float)
+        values[:, self._rot] = np.rad2deg(values[:, self._rot])
+        self._w.write(time, values)
+
+    def close(self) -> None:
+        self._w.close()
+
+    def __enter__(self) -> JointAnglesMotWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def read_joint_angles_mot(path: str | Path) -> JointAngleSeries:

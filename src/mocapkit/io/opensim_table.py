@@ -15,6 +15,7 @@ it (tests/io/test_opensim_round_trips.py runs both readers).
 from __future__ import annotations
 
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -80,10 +81,8 @@ class QuaternionTableWriter:
 
     def write(self, time: FloatArray, quats: FloatArray) -> None:
         """Append rows: ``time`` (N,) [s], ``quats`` (N, k, 4)."""
-        rows = np.column_stack([time, quats.reshape(time.shape[0], -1)]).tolist()
-        if rows:
-            self._f.write("\n".join([self._fmt % tuple(r) for r in rows]) + "\n")
-        self.rows += len(rows)
+        _write_rows(self._f, self._fmt, time, quats.reshape(time.shape[0], -1))
+        self.rows += time.shape[0]
 
     def close(self) -> None:
         self._f.close()
@@ -93,6 +92,18 @@ class QuaternionTableWriter:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+
+# rows formatted at once: Python floats and strings take ~100 B a value, so an hour's
+# table goes out a few megabytes at a time
+_FORMAT_ROWS = 5_000
+
+
+def _write_rows(f: IO[str], fmt: str, time: FloatArray, values: FloatArray) -> None:
+    """``time`` (N,) and ``values`` (N, k) as text rows, ``_FORMAT_ROWS`` at a time."""
+    for a in range(0, time.shape[0], _FORMAT_ROWS):
+        rows = np.column_stack([time[a : a + _FORMAT_ROWS], values[a : a + _FORMAT_ROWS]])
+        f.write("\n".join([fmt % tuple(r) for r in rows.tolist()]) + "\n")
 
 
 def write_table(
@@ -133,22 +144,62 @@ def write_table(
             for a in range(0, t.shape[0], _BLOCK_ROWS):
                 w.write(t[a : a + _BLOCK_ROWS], d[a : a + _BLOCK_ROWS])
         return p
-    lines = [name, "version=3"]
-    lines += [f"nRows={t.shape[0]}", f"nColumns={len(labels) + 1}"]
-    lines.append(f"inDegrees={'yes' if in_degrees else 'no'}")
-    lines.append(f"DataType={data_type or 'double'}")
-    lines.append("endheader")
-    lines.append("\t".join(["time", *labels]))
-    fmt = "\t".join(["%.10g"] * (len(labels) + 1))
-    # written block by block (bounded memory for hour-long tables); one C-level format
-    # per row instead of one Python f-string per value (imu run spent 60 % writing)
-    with open(p, "w") as f:
-        f.write("\n".join(lines) + "\n")
+    with TableWriter(p, labels, name=name, in_degrees=in_degrees,
+                     data_type=data_type or "double") as w:  # fmt: skip
         for a in range(0, t.shape[0], _BLOCK_ROWS):
-            b = min(t.shape[0], a + _BLOCK_ROWS)
-            rows = np.column_stack([t[a:b], d[a:b]]).tolist()
-            f.write("\n".join([fmt % tuple(r) for r in rows]) + "\n")
+            w.write(t[a : a + _BLOCK_ROWS], d[a : a + _BLOCK_ROWS])
     return p
+
+
+class TableWriter:
+    """A numeric ``.mot``/``.sto`` written as it comes, row block by row block (bounded
+    memory for hour-long tables; one C-level format per row instead of one Python
+    f-string per value: ``imu run`` once spent 60 % of its time writing). The header's
+    ``nRows`` is a fixed-width field filled in by :meth:`close`, so the row count need
+    not be known up front; OpenSim's ``TimeSeriesTable`` and ``Storage`` read it whole
+    (tests/io/test_opensim_round_trips.py)."""
+
+    _NROWS_WIDTH = 12
+
+    def __init__(
+        self, path: str | Path, labels: list[str], *, name: str = "mocapkit",
+        in_degrees: bool = True, data_type: str = "double",
+    ) -> None:  # fmt: skip
+        for i, label in enumerate(labels):
+            if not label or any(c in label for c in "\t\n"):
+                raise ShapeError(f"labels[{i}]: {label!r} is not a valid column name")
+        self.path = Path(path)
+        self.labels = list(labels)
+        self.rows = 0
+        self._f: IO[str] = open(self.path, "w")  # noqa: SIM115 (closed in close())
+        self._f.write(f"{name}\nversion=3\n")
+        self._nrows_at = self._f.tell() + len("nRows=")
+        lines = [f"nRows={'0':<{self._NROWS_WIDTH}}", f"nColumns={len(labels) + 1}",
+                 f"inDegrees={'yes' if in_degrees else 'no'}", f"DataType={data_type}",
+                 "endheader", "\t".join(["time", *labels])]  # fmt: skip
+        self._f.write("\n".join(lines) + "\n")
+        self._fmt = "\t".join(["%.10g"] * (len(labels) + 1))
+
+    def write(self, time: Any, values: Any) -> None:
+        """Append rows: ``time`` (N,) [s], ``values`` (N, k) (NaN is written ``nan``)."""
+        t = np.asarray(time, dtype=np.float64)
+        v = np.asarray(values, dtype=np.float64)
+        check_shape(v, "values", t.shape[0], len(self.labels))
+        _write_rows(self._f, self._fmt, t, v)
+        self.rows += t.shape[0]
+
+    def close(self) -> None:
+        if self._f.closed:
+            return
+        self._f.seek(self._nrows_at)
+        self._f.write(f"{self.rows:<{self._NROWS_WIDTH}}")
+        self._f.close()
+
+    def __enter__(self) -> TableWriter:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
 
 
 _BLOCK_ROWS = 50_000
@@ -197,8 +248,41 @@ def read_table(path: str | Path) -> OpenSimTable:
 
 
 def _read_table(p: Path, f: Any) -> OpenSimTable:
-    import itertools
+    header, labels = _read_header(p, f)
+    k = len(labels)
+    times: list[FloatArray] = []
+    datas: list[FloatArray] = []
+    quat: bool | None = None
+    for t, d in _iter_blocks(p, f, header, k, _BLOCK_ROWS):
+        quat = d.ndim == 3
+        times.append(t)
+        datas.append(d)
+    shape = (0, k, 4) if quat else (0, k)
+    time = np.concatenate(times) if times else np.empty(0)
+    data = np.concatenate(datas) if datas else np.empty(shape)
+    in_deg = header.get("inDegrees", "no").lower() == "yes"
+    return OpenSimTable(time, labels, data, in_degrees=in_deg, header=header)
 
+
+def iter_table(path: str | Path, rows: int = _BLOCK_ROWS) -> Iterator[OpenSimTable]:
+    """A ``.mot``/``.sto`` file ``rows`` rows at a time (each piece an
+    :class:`OpenSimTable` with the file's labels and header): the flat-memory reader for
+    hour-long tables. A bad row is named by its row number in the whole file."""
+    if rows < 1:
+        raise ShapeError(f"rows: expected a positive number of rows per piece, got {rows}")
+    p = Path(path)
+    try:
+        with open(p, encoding="utf-8") as f:
+            header, labels = _read_header(p, f)
+            in_deg = header.get("inDegrees", "no").lower() == "yes"
+            for t, d in _iter_blocks(p, f, header, len(labels), rows):
+                yield OpenSimTable(t, labels, d, in_degrees=in_deg, header=header)
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(f"{p}: not a text file ({exc})") from exc
+
+
+def _read_header(p: Path, f: Any) -> tuple[dict[str, str], list[str]]:
+    """The header's ``key=value`` lines and the column labels after ``time``."""
     header: dict[str, str] = {}
     for line in f:
         if line.strip().lower() == "endheader":
@@ -214,13 +298,19 @@ def _read_table(p: Path, f: Any) -> OpenSimTable:
     labels = label_line.rstrip("\r\n").split("\t")
     if labels[0].strip().lower() != "time":
         raise FileFormatError(f"{p}: first column must be 'time', got {labels[0]!r}")
-    k = len(labels) - 1
+    return header, [s.strip() for s in labels[1:]]
+
+
+def _iter_blocks(
+    p: Path, f: Any, header: dict[str, str], k: int, rows: int
+) -> Iterator[tuple[FloatArray, FloatArray]]:
+    """(time (n,), data (n, k) or (n, k, 4)) for each block of ``rows`` lines."""
+    import itertools
+
     quat: bool | None = None
-    times: list[FloatArray] = []
-    datas: list[FloatArray] = []
     row0 = 0
     while True:
-        block = [ln.rstrip("\r\n") for ln in itertools.islice(f, _BLOCK_ROWS)]
+        block = [ln.rstrip("\r\n") for ln in itertools.islice(f, rows)]
         if not block:
             break
         block = [ln for ln in block if ln.strip()]
@@ -232,15 +322,8 @@ def _read_table(p: Path, f: Any) -> OpenSimTable:
                 len(first) > 1 and "," in first[1]
             )
         parsed = _parse_block_fast(block, k, quat) or _parse_block_checked(p, block, k, quat, row0)
-        times.append(parsed[0])
-        datas.append(parsed[1])
+        yield parsed
         row0 += len(block)
-    shape = (0, k, 4) if quat else (0, k)
-    time = np.concatenate(times) if times else np.empty(0)
-    data = np.concatenate(datas) if datas else np.empty(shape)
-    in_deg = header.get("inDegrees", "no").lower() == "yes"
-    return OpenSimTable(time, [s.strip() for s in labels[1:]], data, in_degrees=in_deg,
-                        header=header)  # fmt: skip
 
 
 def _parse_block_checked(

@@ -1,0 +1,154 @@
+"""The streamed body pipeline (``body angles`` on an orientation table, in pieces) equals
+the whole-recording pipeline: calibration, joint angles, segment orientations, summary."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import mocapkit.body.functional as functional
+import mocapkit.body.streamed as streamed
+from mocapkit.body.calibration import pose_coordinates
+from mocapkit.body.pipeline import run_body, summary
+from mocapkit.body.sensor_tree import SensorTree
+from mocapkit.errors import DataError
+from mocapkit.io.joint_angles_mot import read_joint_angles_mot, write_joint_angles_mot
+from mocapkit.io.opensense import read_orientations_sto, write_orientations_sto
+from mocapkit.series import OrientationSeries
+from tests.body.synth import gait_like, random_mountings, sensor_orientations
+
+
+def _recording(tmp_path: Path, seconds: float = 20.0) -> tuple[SensorTree, Path]:
+    """A full-body gait-like recording (still for 1 s) with a short and a long dropout
+    of one sensor (the long one outlasts --max-hold-s) written as OpenSense's .sto."""
+    tree = SensorTree.preset("full_body_15")
+    t = np.arange(int(seconds * 100)) / 100.0
+    coords = gait_like(tree, t, 1.0, pose_coordinates(tree, "npose"), seed=4)
+    mounts = random_mountings(tree, np.random.default_rng(4))
+    ori = sensor_orientations(tree, t, coords, mounts, heading_rad=0.4)
+    name = tree.segments[5].sensor
+    q = ori[name].quat.copy()
+    q[1210:1240] = np.nan  # 0.3 s: held
+    q[1500:1590] = np.nan  # 0.9 s: held 0.5 s, then unknown
+    ori[name] = OrientationSeries(t, q, name=name)
+    path = write_orientations_sto(tmp_path / "walk.sto", ori)
+    return tree, path
+
+
+def _assert_close(a: object, b: object, path: str = "") -> None:
+    """Nested dicts and lists equal, numbers to 1e-9 (relative or absolute)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        assert set(a) == set(b), path
+        for k in a:
+            _assert_close(a[k], b[k], f"{path}.{k}")
+    elif isinstance(a, list) and isinstance(b, list):
+        assert len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            _assert_close(x, y, f"{path}[{i}]")
+    elif isinstance(a, float) and isinstance(b, float):
+        assert a == pytest.approx(b, rel=1e-9, abs=1e-9), path
+    else:
+        assert a == b, path
+
+
+@pytest.fixture
+def short_windows(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Calibrate from 5 s of motion after a pose looked for in the first 3 s, so that a
+    20 s recording has pieces past the calibration head (the defaults: 300 and 600 s)."""
+    monkeypatch.setattr(functional, "MAX_MOTION_S", 5.0)
+    monkeypatch.setattr(streamed, "MAX_MOTION_S", 5.0)
+    monkeypatch.setattr(streamed, "HEAD_S", 3.0)
+
+
+@pytest.mark.usefixtures("short_windows")
+@pytest.mark.parametrize("dropout", ["nan", "hold"])
+def test_streamed_equals_the_whole_recording(tmp_path: Path, dropout: str) -> None:
+    tree, path = _recording(tmp_path)
+    whole = run_body(tree, read_orientations_sto(path), dropout=dropout)
+    write_joint_angles_mot(tmp_path / "whole.mot", whole.body.angles)
+    done = streamed.stream_body(
+        tree, path, output=tmp_path / "piece.mot", segments_output=tmp_path / "seg.sto",
+        dropout=dropout, rows=97,
+    )  # fmt: skip
+    # the same samples, in arrays of another length: equal to the last bits or so
+    _assert_close(done.calibration.to_dict(), whole.calibration.to_dict())
+    a = read_joint_angles_mot(tmp_path / "piece.mot")
+    b = read_joint_angles_mot(tmp_path / "whole.mot")
+    assert a.names == b.names
+    assert a.n_samples == b.n_samples == 2000
+    np.testing.assert_array_equal(a.time, b.time)
+    np.testing.assert_allclose(a.values, b.values, atol=1e-8, equal_nan=True)  # NaN alike
+    assert np.isnan(a.values).any()
+    # the header's row count, filled in at the end, is the rows written
+    assert "nRows=2000 " in (tmp_path / "piece.mot").read_text()[:200]
+    seg = read_orientations_sto(tmp_path / "seg.sto")
+    for name in tree.segment_names:
+        np.testing.assert_allclose(seg[name].quat, whole.segments[name].quat, atol=1e-9,
+                                   equal_nan=True)  # fmt: skip
+    want = summary(whole)
+    got = done.summary
+    assert got["rate_hz"] == pytest.approx(want.pop("rate_hz"))
+    got.pop("rate_hz")
+    _assert_close(json.loads(json.dumps(got)), json.loads(json.dumps(want)))
+    if dropout == "hold":
+        assert got["held"] == {tree.segments[5].sensor: 80}
+
+
+@pytest.mark.usefixtures("short_windows")
+def test_crop_and_a_given_window(tmp_path: Path) -> None:
+    tree, path = _recording(tmp_path)
+    opts = {"start": 0.5, "stop": 17.0, "window": (0.5, 0.95)}
+    whole = run_body(tree, read_orientations_sto(path), **opts)  # type: ignore[arg-type]
+    done = streamed.stream_body(tree, path, output=tmp_path / "a.mot", rows=64, **opts)  # type: ignore[arg-type]
+    a = read_joint_angles_mot(tmp_path / "a.mot")
+    np.testing.assert_array_equal(a.time, whole.body.angles.time)
+    np.testing.assert_allclose(a.values, whole.body.angles.values, atol=1e-9,
+                               equal_nan=True)  # fmt: skip
+    assert done.summary["n_frames"] == whole.body.angles.n_samples
+
+
+def test_time_going_back_across_pieces_names_the_row(tmp_path: Path) -> None:
+    tree, path = _recording(tmp_path, seconds=4.0)
+    lines = path.read_text().splitlines()
+    start = lines.index("endheader") + 2
+    lines[start + 150], lines[start + 149] = lines[start + 149], lines[start + 150]
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(DataError, match="row 150"):
+        streamed.stream_body(tree, path, rows=150)
+
+
+def test_no_still_pose_at_the_start_names_the_fix(tmp_path: Path) -> None:
+    tree = SensorTree.preset("full_body_15")
+    t = np.arange(800) / 100.0
+    coords = gait_like(tree, t, 0.0, pose_coordinates(tree, "npose"), seed=1)
+    ori = sensor_orientations(tree, t, coords, random_mountings(tree, np.random.default_rng(1)), 0)
+    path = write_orientations_sto(tmp_path / "moving.sto", ori)
+    with pytest.raises(Exception, match="--calib-window"):
+        streamed.stream_body(tree, path)
+
+
+def test_cli_streams_an_orientation_table(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    from mocapkit.cli.main import main
+
+    _, path = _recording(tmp_path, seconds=12.0)
+    out = tmp_path / "angles.mot"
+    assert main(["body", "angles", str(path), "--preset", "full_body_15", "-o", str(out),
+                 "--json"]) == 0  # fmt: skip
+    report = json.loads(capsys.readouterr().out)
+    assert report["streamed"] is True
+    assert report["n_frames"] == 1200
+    assert read_joint_angles_mot(out).n_samples == 1200
+    # the BVH needs the whole recording: the whole-recording path, same angles
+    b_mot, bvh = str(tmp_path / "b.mot"), str(tmp_path / "b.bvh")
+    assert main(["body", "angles", str(path), "--preset", "full_body_15", "-o", b_mot,
+                 "--bvh", bvh, "--json"]) == 0  # fmt: skip
+    report = json.loads(capsys.readouterr().out)
+    assert report["streamed"] is False
+    np.testing.assert_allclose(
+        read_joint_angles_mot(out).values,
+        read_joint_angles_mot(tmp_path / "b.mot").values,
+        atol=1e-9,
+    )
