@@ -5,7 +5,7 @@
         [--workers 2] [--write-docs]
 
 One sensor's mocapkit CSV of the length (``memory_vs_length.make_recording``: a smooth
-motion with consumer-grade noise) is written once and linked under as many sensor names
+motion with consumer-grade noise) is written once and hard-linked under as many sensor names
 (the smoother's cost does not depend on the values). ``mocapkit batch imu DIR -o OUT
 --workers N --args '--filter polaris --offline'`` runs as one whole process; reported:
 its wall time, and the peak of the resident memory of the whole process tree (the
@@ -86,7 +86,8 @@ def main() -> None:
         suit = root / "suit"
         suit.mkdir()
         for i in range(args.sensors):
-            (suit / f"sensor_{i + 1:02d}.csv").symlink_to(src)
+            # hard links: the batch takes a symlinked file once (inputs are resolved)
+            os.link(src, suit / f"sensor_{i + 1:02d}.csv")
         work = root / "tmp"
         work.mkdir()
         argv = [sys.executable, "-c", "from mocapkit.cli.main import run; run()", "batch",
