@@ -13,7 +13,18 @@ from mocapkit.errors import MocapkitError
 __version__ = "0.1.0"
 
 # The common path (mocapkit.api), imported on first use so `import mocapkit` stays light.
-_API = ("Reconstruction", "make_filter", "read_c3d", "read_imu", "read_trc", "reconstruct")
+_API = (
+    "BodyMotion",
+    "Reconstruction",
+    "RobotMotion",
+    "body_angles",
+    "make_filter",
+    "read_c3d",
+    "read_imu",
+    "read_trc",
+    "reconstruct",
+    "retarget",
+)
 
 
 def __getattr__(name: str) -> Any:

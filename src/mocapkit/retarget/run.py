@@ -49,9 +49,9 @@ def load_human(
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file or directory")
     if suffix in MARKER_SUFFIXES:
-        import mocapkit
+        from mocapkit.api import reconstruct
 
-        rec = mocapkit.reconstruct(path, height_m=height_m)
+        rec = reconstruct(path, height_m=height_m)
         return from_reconstruction(rec, segments), list(rec.warnings)
     if suffix == ".bvh":
         from mocapkit.retarget.human import from_bvh
@@ -87,7 +87,7 @@ def load_human(
 
 
 def retarget(
-    input_path: str | Path,
+    input_path: str | Path | Any,
     robot: str | Path,
     *,
     height_m: float | None = None,
@@ -96,7 +96,8 @@ def retarget(
     avoid_collisions: bool = False,
     guard_collisions: bool = True,
 ) -> Retargeted:
-    """``input_path`` onto ``robot`` (a packaged name or a YAML): targets, one QP per
+    """``input_path`` (or a ``mocapkit.Reconstruction``) onto ``robot`` (a packaged name
+    or a YAML): targets, one QP per
     frame, and the figures of :mod:`mocapkit.retarget.metrics`. ``guard_collisions``
     (default): every frame checked on the robot's meshes, a colliding step steered round or
     stopped short (``solver`` docstring), so no frame has bodies intersecting.
@@ -109,7 +110,11 @@ def retarget(
     humanoid = build_humanoid(spec)
     segments = tuple(sorted({k.segment for k in spec.keypoints} | {f.segment for f in spec.feet}
                             | {"pelvis"}))  # fmt: skip
-    motion, notes = load_human(Path(input_path), segments, height_m=height_m, preset=preset)
+    if hasattr(input_path, "subject"):  # a Reconstruction from mocapkit.reconstruct
+        motion = from_reconstruction(input_path, segments)
+        notes = list(getattr(input_path, "warnings", ()))
+    else:
+        motion, notes = load_human(Path(input_path), segments, height_m=height_m, preset=preset)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RetargetWarning)
         targets = make_targets(motion, humanoid)
