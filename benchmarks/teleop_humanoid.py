@@ -69,7 +69,7 @@ def run(robot: str) -> dict[str, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--robots", default="g1,talos,icub")
+    parser.add_argument("--robots", default="g1,talos,romeo,icub")
     parser.add_argument("--write-docs", action="store_true")
     args = parser.parse_args()
     rows = []

@@ -119,3 +119,11 @@ def test_retarget_a_reconstruction_onto_g1(tmp_path: Path) -> None:
     out = motion.write(tmp_path / "walk_g1.csv")
     table = np.loadtxt(out, delimiter=",", skiprows=1)
     np.testing.assert_allclose(table[:, 8:], motion.q, rtol=1e-8, atol=1e-8)
+
+
+def test_retarget_stays_callable_once_the_subpackage_is_imported() -> None:
+    import mocapkit.retarget.robot_spec  # sets mocapkit.retarget to the package
+
+    assert callable(mocapkit.retarget)
+    with pytest.raises(TypeError):
+        mocapkit.retarget(TRC, "g1")  # type: ignore[misc]  # options by keyword only

@@ -150,3 +150,70 @@ def batch_kernel(
             last_q, last_t, cont, have_prev, last_third,
             q_seg[n], out[n], stale[n], gimbal[n], near[n], work,
         )  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def _rotate_add(q, v, base, out):
+    """``out = base + q v q*`` (3-vectors): ``v + w t + u x t``, ``u = q_xyz``, ``t = 2 u x v``."""
+    w, ux, uy, uz = q[0], q[1], q[2], q[3]
+    tx = 2.0 * (uy * v[2] - uz * v[1])
+    ty = 2.0 * (uz * v[0] - ux * v[2])
+    tz = 2.0 * (ux * v[1] - uy * v[0])
+    out[0] = base[0] + v[0] + w * tx + (uy * tz - uz * ty)
+    out[1] = base[1] + v[1] + w * ty + (uz * tx - ux * tz)
+    out[2] = base[2] + v[2] + w * tz + (ux * ty - uy * tx)
+
+
+@njit(cache=True)
+def pose_frame_kernel(
+    values, slot_coord, signs, offsets, q_b, parents, seg_offset, q_wg, out_q, out_p, work
+):
+    """One frame of coordinates -> world poses of every segment (the inverse of
+    :func:`frame_kernel`; :func:`mocapkit.body.simulate.segment_poses` for one frame, the
+    root at its offset). ``values`` (K,) [rad]; ``slot_coord`` (S, 3): the coordinate of
+    each XYZ slot (-1: none, a zero angle); ``seg_offset`` (S, 3): each segment's origin
+    in its parent [m]; out_q (S, 4) ``q_world_segment``, out_p (S, 3) [m]; ``work``
+    (S, 7) scratch (the ground-frame poses). Parents come before their children."""
+    qj = np.empty(4)
+    tmp = np.empty(4)
+    conj_b = np.empty(4)
+    zero = np.zeros(3)
+    for i in range(parents.shape[0]):
+        a0 = (
+            (values[slot_coord[i, 0]] - offsets[i, 0]) / signs[i, 0]
+            if slot_coord[i, 0] >= 0
+            else 0.0
+        )
+        a1 = (
+            (values[slot_coord[i, 1]] - offsets[i, 1]) / signs[i, 1]
+            if slot_coord[i, 1] >= 0
+            else 0.0
+        )
+        a2 = (
+            (values[slot_coord[i, 2]] - offsets[i, 2]) / signs[i, 2]
+            if slot_coord[i, 2] >= 0
+            else 0.0
+        )
+        # intrinsic XYZ: qx(a0) qy(a1) qz(a2)
+        cx, sx = math.cos(0.5 * a0), math.sin(0.5 * a0)
+        cy, sy = math.cos(0.5 * a1), math.sin(0.5 * a1)
+        cz, sz = math.cos(0.5 * a2), math.sin(0.5 * a2)
+        qj[0] = cx * cy * cz - sx * sy * sz
+        qj[1] = sx * cy * cz + cx * sy * sz
+        qj[2] = cx * sy * cz - sx * cy * sz
+        qj[3] = cx * cy * sz + sx * sy * cz
+        quat_mul_into(q_b[i], qj, tmp)
+        conj_b[0], conj_b[1], conj_b[2], conj_b[3] = q_b[i, 0], -q_b[i, 1], -q_b[i, 2], -q_b[i, 3]
+        p = parents[i]
+        q_g = work[i, :4]
+        p_g = work[i, 4:]
+        if p < 0:
+            quat_mul_into(tmp, conj_b, q_g)
+            p_g[:] = seg_offset[i]
+        else:
+            quat_mul_into(tmp, conj_b, qj)  # q_parent_segment
+            quat_mul_into(work[p, :4], qj, q_g)
+            _rotate_add(work[p, :4], seg_offset[i], work[p, 4:], p_g)
+    for i in range(parents.shape[0]):
+        quat_mul_into(q_wg, work[i, :4], out_q[i])
+        _rotate_add(q_wg, work[i, 4:], zero, out_p[i])

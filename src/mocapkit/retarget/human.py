@@ -169,6 +169,85 @@ def from_coordinates(
     return _on_the_ground(np.asarray(time, dtype=float), pos, quat, n_pos, n_quat, "joint angles")
 
 
+class FrameSkeleton:
+    """:func:`from_coordinates` one frame at a time, for the live path: the skeleton's
+    forward kinematics in one numba call (``body._kernels.pose_frame_kernel``, tens of
+    microseconds instead of milliseconds of numpy on one-row arrays). Same motion as
+    ``from_coordinates`` on that frame alone (tests/retarget/test_live.py)."""
+
+    def __init__(self, segments: tuple[str, ...]) -> None:
+        from mocapkit.body.calibration import q_world_ground
+        from mocapkit.body.joint_angles import joint_tables
+
+        tree_obj, neutral = _skeleton()
+        tree: Any = tree_obj
+        inverse = {v: k for k, v in TREE_TO_HUMAN.items()}
+        unknown = [s for s in segments if s not in inverse]
+        if unknown:
+            raise DataError(
+                f"joint angles drive the segments {', '.join(TREE_TO_HUMAN.values())}; the "
+                f"robot map also names {unknown[0]!r}"
+            )
+        self.coordinate_names: tuple[str, ...] = tuple(tree.coordinate_names)
+        index = {c: k for k, c in enumerate(self.coordinate_names)}
+        self._q_b, self._signs, self._offsets = joint_tables(tree)
+        slots = np.full((len(tree.segments), 3), -1, dtype=np.int64)
+        for i, seg in enumerate(tree.segments):
+            order = seg.joint.slots()[0]
+            for j in range(3):
+                c = seg.joint.coordinates[order[j]]
+                slots[i, j] = index[c] if c is not None else -1
+        self._slots = slots
+        self._parents = np.ascontiguousarray(tree.parent_index, dtype=np.int64)
+        self._seg_offset = np.array([np.asarray(s.offset, dtype=float) for s in tree.segments])
+        self._q_wg = np.ascontiguousarray(q_world_ground(0.0))
+        names = [s.name for s in tree.segments]
+        self.segments = segments
+        self._rows = [names.index(inverse[s]) for s in segments]
+        self._feet = [k for k, s in enumerate(segments) if s.startswith("foot")]
+        n_pos = {s: neutral[inverse[s]].pos[0] for s in segments}  # type: ignore[attr-defined]
+        soles = [p[2] for s, p in n_pos.items() if s.startswith(("foot", "toes"))]
+        sole = (min(soles) - ANKLE_HEIGHT_M) if soles else -ANKLE_HEIGHT_M
+        self._neutral_pos = {s: p - [0.0, 0.0, sole] for s, p in n_pos.items()}
+        self._neutral_quat = {s: neutral[inverse[s]].quat[0] for s in segments}  # type: ignore[attr-defined]
+        n = len(tree.segments)
+        self._values = np.zeros(len(self.coordinate_names))
+        self._q = np.empty((n, 4))
+        self._p = np.empty((n, 3))
+        self._work = np.empty((n, 7))
+
+    def __call__(self, t: float, coords: Mapping[str, float]) -> HumanMotion:
+        """One frame of joint angles [rad] (``pelvis_t?`` [m] optional) -> its motion."""
+        from mocapkit.body._kernels import pose_frame_kernel
+
+        for c in ("pelvis_tilt", "pelvis_list", "pelvis_rotation"):
+            if c not in coords:
+                raise DataError(f"joint angles: no {c}; the pelvis is needed")
+        v = self._values
+        for k, c in enumerate(self.coordinate_names):
+            x = float(coords.get(c, 0.0))
+            v[k] = x if x == x and abs(x) != np.inf else 0.0  # as np.nan_to_num for angles
+        pose_frame_kernel(v, self._slots, self._signs, self._offsets, self._q_b, self._parents,
+                          self._seg_offset, self._q_wg, self._q, self._p, self._work)  # fmt: skip
+        shift = np.zeros(3)
+        if all(c in coords for c in ("pelvis_tx", "pelvis_ty", "pelvis_tz")):
+            shift[:2] = float(coords["pelvis_tx"]), -float(coords["pelvis_tz"])
+        feet = sorted(self._p[self._rows[k], 2] + shift[2] for k in self._feet)
+        ground = 0.0
+        if feet:  # np.nanpercentile(feet, 2) (linear), less the ankle's height
+            at = 0.02 * (len(feet) - 1)
+            lo = int(at)
+            hi = min(lo + 1, len(feet) - 1)
+            ground = feet[lo] + (at - lo) * (feet[hi] - feet[lo]) - ANKLE_HEIGHT_M
+        shift[2] -= ground
+        pos = {
+            s: (self._p[r] + shift)[None] for s, r in zip(self.segments, self._rows, strict=True)
+        }
+        quat = {s: self._q[r].copy()[None] for s, r in zip(self.segments, self._rows, strict=True)}
+        return HumanMotion(np.array([t], dtype=float), pos, quat, self._neutral_pos,
+                           self._neutral_quat, "joint angles")  # fmt: skip
+
+
 # BVH joint names (lower case, any "prefix:" dropped) -> human segments
 BVH_NAMES = {
     "pelvis": ("hips", "hip", "pelvis", "root"),

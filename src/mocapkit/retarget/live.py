@@ -20,7 +20,7 @@ import numpy as np
 
 from mocapkit._validate import FloatArray
 from mocapkit.retarget.collisions import SelfCollision
-from mocapkit.retarget.human import from_coordinates
+from mocapkit.retarget.human import FrameSkeleton
 from mocapkit.retarget.robot_model import Humanoid, build_humanoid
 from mocapkit.retarget.robot_spec import load_robot_spec
 from mocapkit.retarget.solver import FrameSolver
@@ -43,6 +43,7 @@ class LiveRetargeter:
         self.segments = tuple(sorted({k.segment for k in spec.keypoints}
                                      | {f.segment for f in spec.feet} | {"pelvis"}))  # fmt: skip
         self.feet = [f.segment for f in spec.feet]
+        self.skeleton = FrameSkeleton(self.segments)  # from_coordinates, one frame, in numba
         self.dt = 1.0 / rate_hz
         self.start: tuple[FloatArray, FloatArray] | None = None
         self.solver: FrameSolver | None = None
@@ -52,8 +53,7 @@ class LiveRetargeter:
     def update(self, coordinates: Mapping[str, float], t: float) -> FloatArray:
         """One frame of joint angles [rad] -> the robot configuration (nq,)."""
         t0 = time.perf_counter()
-        coords = {k: np.array([float(v)]) for k, v in coordinates.items()}
-        motion = from_coordinates(np.array([t]), coords, self.segments)
+        motion = self.skeleton(t, coordinates)
         heights = {f: float(motion.pos[f][0, 2]) for f in self.feet}
         low = min(heights.values()) if heights else 0.0
         contact = {f: np.array([h <= low + CONTACT_HEIGHT_M]) for f, h in heights.items()}

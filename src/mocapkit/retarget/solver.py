@@ -178,14 +178,16 @@ class FrameSolver:
                 self.held.append(k)
                 break
             self._advance(dq)
-            if first and self._collides():  # the start pose is reached through free space
-                self._keep_apart(k, first, q_before, q_start)
+            hit = self._collisions() if first else []
+            if hit:  # the start pose is reached through free space
+                self._keep_apart(k, first, q_before, q_start, hit)
                 parted += 1
             settled = first and _moved(m, q_before, self.q) < FIRST_SETTLED_RAD
             if settled or parted >= FIRST_PARTED:
                 break  # at rest, or pressed against a body the guard keeps it from
-        if not first and self._collides():
-            self._keep_apart(k, first, q_start, q_start)
+        hit = [] if first else self._collisions()
+        if hit:
+            self._keep_apart(k, first, q_start, q_start, hit)
         step = (
             np.asarray(pin.difference(m, self.q_last, self.q))
             if self.q_last is not None
@@ -239,17 +241,20 @@ class FrameSolver:
         iq = self.robot.iq  # the QP meets the box to its tolerance: clip exactly
         self.q[iq] = np.clip(self.q[iq], self.robot.q_min[iq], self.robot.q_max[iq])
 
-    def _collides(self) -> bool:
-        return self.guard is not None and self.guard.any_colliding(self.q)
+    def _collisions(self) -> list[int]:
+        """The pairs intersecting in ``self.q`` (all of them: a colliding frame needs the
+        list, and a free one tests every candidate either way)."""
+        return [] if self.guard is None else self.guard.colliding_pairs(self.q)
 
-    def _keep_apart(self, k: int, first: bool, q_free: FloatArray, q_start: FloatArray) -> None:
-        """``self.q`` collides and ``q_free`` does not: go as far towards ``self.q`` as the
-        bodies allow, then one more step from there with hard avoidance rows (pairs in
-        touch move apart: the step slides along the contact), as far as it stays apart.
-        A frame that ends short of its step is reported (``stopped``)."""
+    def _keep_apart(
+        self, k: int, first: bool, q_free: FloatArray, q_start: FloatArray, hit: list[int]
+    ) -> None:
+        """``self.q`` collides (pairs ``hit``) and ``q_free`` does not: go as far towards
+        ``self.q`` as the bodies allow, then one more step from there with hard avoidance
+        rows (pairs in touch move apart: the step slides along the contact), as far as it
+        stays apart. A frame that ends short of its step is reported (``stopped``)."""
         assert self.guard is not None
         q_bad = self.q
-        hit = self.guard.colliding_pairs(q_bad)
         self.watched.update({p: self.n_steps + GUARD_ROWS_STEPS for p in hit})
         q_safe = self._last_free(q_free, q_bad)
         self.q = q_safe
