@@ -201,3 +201,111 @@ def test_an_arm_gets_end_effector_poses_for_its_own_ik() -> None:
             p = msg.pose.position
             assert (p.x, p.y, p.z) == (0.5, -0.1, 0.2)
             assert msg.pose.orientation.w == 1.0
+
+
+class FakeArm:
+    """An arm with its own IK as rmw_zenoh shows it (the paper's Robonaut route): takes
+    ``PoseStamped`` targets on /target_pose, reports where its hand is on /current_pose,
+    the hand moving towards the last target at ``speed`` [m/s] (orientation at once)."""
+
+    def __init__(self, frame: str, pos0: list[float], speed: float = 1.0) -> None:
+        self.session, self.endpoint = listening_peer()
+        self.frame = frame
+        self.pos = np.asarray(pos0, dtype=float)
+        self.quat = np.array([1.0, 0.0, 0.0, 0.0])
+        self.speed = speed
+        self.targets: list = []
+        self.path: list[np.ndarray] = []
+        self.node = Ros2ZenohPublisher(connect=[self.endpoint], domain_id=0)
+        self.node.subscribe("/target_pose", "geometry_msgs/msg/PoseStamped", self._on_target)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True)
+
+    def _on_target(self, msg) -> None:  # type: ignore[no-untyped-def]
+        if msg is not None:
+            self.targets.append(msg)
+
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            if self.targets:
+                m = self.targets[-1].pose
+                goal = np.array([m.position.x, m.position.y, m.position.z])
+                step = goal - self.pos
+                n = float(np.linalg.norm(step))
+                self.pos = self.pos + (
+                    step if n <= self.speed * 0.02 else step * self.speed * 0.02 / n
+                )
+                o = m.orientation
+                self.quat = np.array([o.w, o.x, o.y, o.z])
+            self.path.append(self.pos.copy())
+            self.node.pose_stamped("/current_pose", self.frame, self.pos, self.quat)
+            time.sleep(0.02)
+
+    def __enter__(self) -> FakeArm:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.node.close()
+        self.session.close()
+
+
+def test_the_arm_follows_the_operator_through_its_own_ik() -> None:
+    """The paper's chain over ROS 2: simulated suit process, body model, Robonaut 2's
+    right arm in the session, end-effector poses to an arm that does its own IK; while
+    engaged the arm's hand traces the operator's vertical shape from where it was (up and
+    down by more than 10 cm), every target in the arm's base frame."""
+    pytest.importorskip("pinocchio")
+    from mocapkit.body.sensor_tree import SensorTree
+    from mocapkit.teleop.live import LiveConfig, LiveSession
+    from mocapkit.teleop.operator import operator_motion
+    from mocapkit.teleop.operator_suit import SuitSetup, suit_timeline
+    from mocapkit.teleop.pipeline import PipelineConfig
+    from mocapkit.teleop.sender import TimelineSender
+    from tests.teleop.test_live import _sleep_until
+
+    motion = operator_motion(
+        "vertical", SensorTree.preset("right_arm_2"), calib_s=2.0, reach_s=1.2,
+        settle_s=0.6, shape_s=5.0, hold_s=0.5, heading_rad=0.7,
+    )  # fmt: skip
+    items, _ = suit_timeline(motion, SuitSetup(), {"upper_arm_r": 1, "forearm_r": 2},
+                             np.random.default_rng(0))  # fmt: skip
+    frame = "r2/right_base"
+    arms: list[FakeArm] = []
+
+    def make_link(pipeline) -> Ros2RobotLink:  # type: ignore[no-untyped-def]
+        arm = FakeArm(frame, [0.3, -0.3, -0.2]).__enter__()
+        arms.append(arm)
+        return Ros2RobotLink((), [arm.endpoint], domain_id=0, pose_topic="/target_pose",
+                             frame_id=frame)  # fmt: skip
+
+    cfg = LiveConfig(pipeline=PipelineConfig(robot="robonaut2-right"))
+    live = LiveSession(cfg, None, make_link=make_link)
+    try:
+        with live, TimelineSender(items, "127.0.0.1", live.suit_port) as sender:
+            assert _wait(lambda: live.link.robot_pose() is not None, 20.0)
+            t_go = sender.go()
+            _sleep_until(t_go + motion.calib_window[0])
+            assert live.calibrate(motion.calib_window[1] - motion.calib_window[0]) is not None
+            _sleep_until(t_go + motion.engage_t)
+            live.engage()
+            assert _wait(lambda: live.snapshot()["state"] == "engaged", 8.0)
+            arm = arms[0]
+            n0 = len(arm.path)
+            time.sleep(3.0)  # the vertical shape goes on (5 s)
+            assert len(arm.targets) > 50
+            assert all(m.header.frame_id == frame for m in arm.targets)
+            z = np.array(arm.path[n0:])[:, 2]
+            # relative control: the hand starts where it was, goes up with the operator's
+            # hand and comes down again (the shape's vertical stroke, ~0.17 m)
+            assert abs(z[0] - (-0.2)) < 0.01
+            top = int(np.argmax(z))
+            assert z[top] - z[0] > 0.10
+            assert z[top] - z[top:].min() > 0.10
+            live.disengage()
+            sender.wait(20.0)
+    finally:
+        for a in arms:
+            a.__exit__()
