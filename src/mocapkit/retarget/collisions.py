@@ -156,6 +156,7 @@ class SelfCollision:
         # while B moves less than that relative to A (exact: no collision is missed)
         self._certificates: dict[int, tuple[FloatArray, float]] = {}
         self.certified = 0  # mesh tests a certificate spared
+        self._known: dict[bytes, list[int]] = {}  # configuration -> colliding pairs
         for req in self.hd.collisionRequests:
             req.security_margin = HULL_MARGIN_M
 
@@ -201,11 +202,31 @@ class SelfCollision:
 
     def any_colliding(self, q: FloatArray) -> bool:
         """Whether any checked pair intersects in ``q`` (stops at the first)."""
-        return next(self._hits(q), None) is not None
+        key = np.ascontiguousarray(q, dtype=np.float64).tobytes()
+        known = self._known.get(key)
+        if known is not None:
+            return bool(known)
+        hit = next(self._hits(q), None)
+        if hit is None:  # every candidate tested: the complete answer
+            self._remember(key, [])
+        return hit is not None
 
     def colliding_pairs(self, q: FloatArray) -> list[int]:
         """Indices (into ``pairs``) of the pairs that intersect in ``q``."""
-        return list(self._hits(q))
+        key = np.ascontiguousarray(q, dtype=np.float64).tobytes()
+        known = self._known.get(key)
+        if known is None:
+            known = list(self._hits(q))
+            self._remember(key, known)
+        return list(known)
+
+    def _remember(self, key: bytes, hits: list[int]) -> None:
+        """The answer for one configuration (the same bytes, the same answer): the
+        solver's checks of each frame's final configuration answer the counting of the
+        collisions afterwards (``metrics.evaluate``), which otherwise doubled the cost."""
+        if len(self._known) >= KNOWN_MAX:
+            self._known.clear()
+        self._known[key] = hits
 
     def joints_between(self, pairs: list[int]) -> set[int]:
         """The joints on the kinematic paths between the bodies of ``pairs`` (not their
@@ -227,6 +248,8 @@ class SelfCollision:
 
 # distance certificates below this are not kept (the meshes nearly touch: test them)
 CERTIFICATE_MIN_M = 1e-4
+# configurations whose answer is kept (~0.5 KB each) before the memory is cleared
+KNOWN_MAX = 100_000
 
 
 def _moved_by(rel0: FloatArray, rel1: FloatArray, centre: FloatArray, radius: float) -> float:

@@ -51,6 +51,9 @@ GUARD_BISECTIONS = 6  # halvings of a colliding step (1/64 of it)
 # the next iteration on was tried: 20 ms there, but Talos then started walking2 in a pose
 # that stopped 249 of its frames short.)
 FIRST_SETTLED_RAD = 1e-3
+# A later frame's second iteration only when its first moved a joint further than this
+# [rad]: a frame starts from the last one's solution, and a small step is already there
+SETTLED_RAD = 0.02
 FIRST_PARTED = 3
 GUARD_ROWS_STEPS = 50
 
@@ -182,7 +185,7 @@ class FrameSolver:
             if hit:  # the start pose is reached through free space
                 self._keep_apart(k, first, q_before, q_start, hit)
                 parted += 1
-            settled = first and _moved(m, q_before, self.q) < FIRST_SETTLED_RAD
+            settled = _moved(m, q_before, self.q) < (FIRST_SETTLED_RAD if first else SETTLED_RAD)
             if settled or parted >= FIRST_PARTED:
                 break  # at rest, or pressed against a body the guard keeps it from
         hit = [] if first else self._collisions()
