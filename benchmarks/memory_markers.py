@@ -1,0 +1,82 @@
+"""Time and peak memory of ``mocapkit markers reconstruct`` against trial length (issue 16).
+
+    python -m benchmarks.memory_markers [--minutes 1 10 60] [--write-docs]
+
+OpenSim's gait2392 walk (``subject01_walk1.trc`` in ../shared: 151 frames at 60 Hz) is
+played forwards then backwards, again and again, to the length asked for (the markers
+stay continuous: no jump where one copy meets the next), written as a TRC, and
+reconstructed by ``mocapkit markers reconstruct --height-m 1.80 -o OUT.mot`` (direct
+marker control, offline) as a whole process; reported: wall time and the child's peak
+resident memory. Target (issue 16): within 2x from 1 min to 1 h.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks._docs import write_section
+from benchmarks.memory_vs_length import measure
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+TRC = SHARED / "opensim" / "gait2392" / "subject01_walk1.trc"
+
+
+def long_trial(path: Path, minutes: float) -> int:
+    """The walk ping-ponged to ``minutes`` as a TRC at 60 Hz; returns its frames."""
+    from mocapkit.io.trc import read_trc, write_trc
+    from mocapkit.markers.trajectories import MarkerTrajectories
+
+    walk = read_trc(TRC)
+    rate = walk.rate_hz
+    there_and_back = np.concatenate([walk.positions, walk.positions[-2:0:-1]])
+    n = round(minutes * 60.0 * rate)
+    reps = -(-n // there_and_back.shape[0])
+    pos = np.concatenate([there_and_back] * reps)[:n]
+    traj = MarkerTrajectories(np.arange(n) / rate, pos, walk.names, dict(walk.meta))
+    write_trc(path, traj, rate_hz=rate)
+    return n
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, nargs="+", default=[1.0, 10.0, 60.0])
+    parser.add_argument("--write-docs", action="store_true")
+    args = parser.parse_args()
+    if not TRC.exists():
+        raise SystemExit(f"needs {TRC}")
+    exe = [sys.executable, "-c", "from mocapkit.cli.main import run; run()"]
+    rows = []
+    with tempfile.TemporaryDirectory() as d:
+        for minutes in args.minutes:
+            src = Path(d) / f"walk_{minutes:g}min.trc"
+            frames = long_trial(src, minutes)
+            m = measure([*exe, "markers", "reconstruct", str(src), "--height-m", "1.80",
+                         "-o", str(Path(d) / "out.mot")])  # fmt: skip
+            rows.append((minutes, frames, m))
+            print(minutes, frames, m, flush=True)
+    lines = ["| trial | frames | whole process [s] | frames/s | peak memory [MB] |",
+             "|---:|---:|---:|---:|---:|"]  # fmt: skip
+    for minutes, frames, m in rows:
+        lines.append(f"| {minutes:g} min | {frames} | {m['seconds']:.1f} | "
+                     f"{frames / m['seconds']:.0f} | {m['peak_mb']:.0f} |")  # fmt: skip
+    growth = rows[-1][2]["peak_mb"] / rows[0][2]["peak_mb"]
+    lengths = " ".join(f"{x:g}" for x in args.minutes)
+    text = (
+        f"`python -m benchmarks.memory_markers --minutes {lengths}`"
+        " (OpenSim's gait2392 walk played forwards and backwards to the length, 60 Hz, "
+        "`mocapkit markers reconstruct --height-m 1.80`, direct marker control, whole "
+        f"processes). Peak memory from the shortest to the longest: x{growth:.1f} "
+        "(target: within x2).\n\n" + "\n".join(lines)
+    )
+    print(text)
+    if args.write_docs:
+        write_section("Memory and time against recording length: markers", text)
+
+
+if __name__ == "__main__":
+    main()
