@@ -160,9 +160,11 @@ class SelfCollision:
         for req in self.hd.collisionRequests:
             req.security_margin = HULL_MARGIN_M
 
-    def _pair_collides(self, k: int) -> bool:
+    def _pair_collides(self, k: int, certify: bool = True) -> bool:
         """Pair ``k`` intersects (placements updated): the hulls first, then a distance
-        certificate, then the meshes."""
+        certificate, then the meshes; ``certify``: where the meshes are apart, measure how
+        far (a certificate for the next frames; not while bisecting, where each
+        configuration is visited once and the distance would cost twice the test)."""
         import pinocchio as pin
 
         if not pin.computeCollision(self.hm, self.hd, k):
@@ -176,6 +178,8 @@ class SelfCollision:
         if pin.computeCollision(self.gm, self.gd, k):
             self._certificates.pop(k, None)
             return True
+        if not certify:
+            return False
         # hulls touching, meshes apart (concave bodies, a hand's fingers): how far apart,
         # so that the next frames need not test the meshes while the bodies barely move
         d = float(pin.computeDistance(self.gm, self.gd, k).min_distance)
@@ -188,7 +192,7 @@ class SelfCollision:
         ma = self.gd.oMg[a]
         return np.asarray((ma.actInv(self.gd.oMg[b])).homogeneous)
 
-    def _hits(self, q: FloatArray) -> Iterator[int]:
+    def _hits(self, q: FloatArray, certify: bool = True) -> Iterator[int]:
         """Indices (into ``pairs``) of the pairs that intersect in ``q``, the closest
         first, found one by one (a caller may stop at the first)."""
         import pinocchio as pin
@@ -198,15 +202,16 @@ class SelfCollision:
         pin.forwardKinematics(self.robot.model, self.data, q)
         cand = self._candidates(0.0)
         pin.updateGeometryPlacements(self.robot.model, self.data, self.hm, self.hd)
-        yield from (int(k) for k in cand if self._pair_collides(int(k)))
+        yield from (int(k) for k in cand if self._pair_collides(int(k), certify))
 
     def any_colliding(self, q: FloatArray) -> bool:
-        """Whether any checked pair intersects in ``q`` (stops at the first)."""
+        """Whether any checked pair intersects in ``q`` (stops at the first; the guard's
+        bisections: uses the distance certificates, makes none)."""
         key = np.ascontiguousarray(q, dtype=np.float64).tobytes()
         known = self._known.get(key)
         if known is not None:
             return bool(known)
-        hit = next(self._hits(q), None)
+        hit = next(self._hits(q, certify=False), None)
         if hit is None:  # every candidate tested: the complete answer
             self._remember(key, [])
         return hit is not None
