@@ -107,3 +107,82 @@ def test_cli_record_lsl_writes_a_mocapkit_csv(tmp_path, capsys) -> None:
     assert report["magnetometer"] is False
     rec = read_imu_csv(out)
     assert rec.n_samples == report["samples"] > 100
+
+
+def test_raw_suit_samples_reach_an_lsl_imu_recording() -> None:
+    """RawOutlets (one outlet per sensor) read back by mocapkit's own LSL IMU recorder:
+    the values, the sensor's sample spacing as the stamps, a magnetometer gap as a gap."""
+    from mocapkit.io.lsl import RawOutlets
+    from mocapkit.suit.samples import Kind, SuitSample
+
+    tag = uuid.uuid4().hex[:6]
+    raw = RawOutlets({3: f"thigh{tag}", 4: f"shank{tag}"}, 100.0, with_mag=True)
+    got: dict[str, object] = {}
+
+    def record() -> None:
+        got["rec"] = record_imu(f"mocapkit-imu-thigh{tag}", 2.0)
+
+    th = threading.Thread(target=record)
+    th.start()
+    outlet = raw.outlets[3]
+    deadline = time.monotonic() + 5.0
+    while not outlet.have_consumers() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    time.sleep(0.2)
+    pushed = 0
+    for k in range(100):
+        batch = [
+            SuitSample(sid, k, 10.0 + 0.01 * k, time.perf_counter_ns(), Kind.RAW,
+                       gyr=np.array([0.01 * k, 0.0, sid]), acc=np.array([0.0, 0.0, 9.81]),
+                       mag=None if k == 50 else np.array([20.0, 0.0, -40.0]))
+            for sid in (3, 4, 9)  # 9: a sensor without an outlet, skipped
+        ]  # fmt: skip
+        batch.append(SuitSample(3, k, 10.0, 0, Kind.ORIENTATION, quat=np.array([1.0, 0, 0, 0])))
+        pushed += raw.push(batch)
+        time.sleep(0.005)
+    th.join(10.0)
+    assert pushed == 200  # two sensors with outlets, raw samples only
+    rec = got["rec"]
+    assert rec.n_samples == 100  # type: ignore[attr-defined]
+    np.testing.assert_allclose(rec.gyr[:, 0], 0.01 * np.arange(100), atol=1e-6)  # type: ignore[attr-defined]
+    np.testing.assert_allclose(rec.gyr[:, 2], 3.0)  # type: ignore[attr-defined]
+    np.testing.assert_allclose(np.diff(rec.time), 0.01, atol=1e-6)  # type: ignore[attr-defined]
+    assert np.isnan(rec.mag[50]).all()  # type: ignore[attr-defined]
+    np.testing.assert_allclose(rec.mag[49], [20.0, 0.0, -40.0])  # type: ignore[attr-defined]
+
+
+def test_teleop_run_lsl_adds_raw_outlets_with_host_fusion() -> None:
+    """``teleop run --lsl`` with host-side fusion: every batch the session takes goes to
+    the sensors' raw outlets too (the session's own batch path, no suit needed)."""
+    from mocapkit.teleop.live import LiveConfig, LiveSession
+    from mocapkit.teleop.pipeline import PipelineConfig
+
+    cfg = LiveConfig(pipeline=PipelineConfig(fusion="host", use_mag=False))
+    live = LiveSession(cfg, ("127.0.0.1", 9))  # a robot address nobody answers: not used
+    try:
+        _check_raw_outlets(live)
+    finally:
+        live.link.close()
+
+
+def _check_raw_outlets(live) -> None:  # type: ignore[no-untyped-def]
+    from mocapkit.suit.samples import Kind, SuitSample
+    from mocapkit.teleop.run import _lsl_outlets
+
+    _lsl_outlets(live)
+    assert len(live.batch_listeners) == 1
+    sid = dict(live.pipeline.sensor_ids)["upper_arm_r"]
+    found = pylsl.resolve_byprop("name", "mocapkit-imu-upper_arm_r", timeout=5)
+    inlet = pylsl.StreamInlet(found[0])
+    inlet.open_stream(timeout=5)
+    assert inlet.info().channel_count() == 6  # no magnetometer in this session
+    time.sleep(0.3)
+    for k in range(30):
+        s = SuitSample(sid, k, 0.01 * k, time.perf_counter_ns(), Kind.RAW,
+                       gyr=np.array([0.1, 0.0, 0.0]), acc=np.array([0.0, 0.0, 9.81]))  # fmt: skip
+        live._on_batch([s], time.perf_counter_ns())
+    time.sleep(0.3)
+    chunk, stamps = inlet.pull_chunk(timeout=1.0)
+    assert len(chunk) == 30
+    np.testing.assert_allclose(np.array(chunk)[:, 5], 9.81, rtol=1e-6)
+    np.testing.assert_allclose(np.diff(stamps), 0.01, atol=1e-6)

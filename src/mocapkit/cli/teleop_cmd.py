@@ -131,7 +131,7 @@ def register(sub: Any) -> None:
         "--lsl",
         action="store_true",
         help="LSL outlets (pylsl): mocapkit-joint-angles and mocapkit-orientations, one "
-        "sample per frame",
+        "sample per frame; with --fusion host also mocapkit-imu-<sensor>, every raw sample",
     )
     rn.add_argument(
         "--ros2-zenoh",

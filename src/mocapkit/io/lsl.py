@@ -7,7 +7,10 @@ suit frame, stamped with ``pylsl.local_clock()`` when the frame was processed:
 - ``mocapkit-joint-angles`` (type ``MoCap``): the body model's joint angles [rad], one
   channel per OpenSim coordinate (channel labels in the stream's description);
 - ``mocapkit-orientations`` (type ``Orientation``): every sensor's ``q_world_sensor``,
-  4 channels per sensor ``<sensor>_qw, _qx, _qy, _qz``.
+  4 channels per sensor ``<sensor>_qw, _qx, _qy, _qz``;
+- ``mocapkit-imu-<sensor>`` (type ``IMU``, :class:`RawOutlets`, with host-side fusion:
+  the suit sends raw samples then): every raw sample as it arrives, gyroscope [rad/s],
+  accelerometer [m/s^2] and, with magnetometers, the field [uT].
 
 Inlet (:func:`record_imu`, ``mocapkit imu record-lsl``): an LSL stream of IMU samples
 (6 channels gyroscope [rad/s] then accelerometer [m/s^2], or 9 with a magnetometer, in
@@ -23,7 +26,7 @@ import contextlib
 import logging
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -84,6 +87,50 @@ class SessionOutlets:
                 np.asarray(q_sensor, dtype=np.float32).ravel().tolist(), t
             )
         self.pushed += 1
+
+
+class RawOutlets:
+    """The suit's raw IMU samples, one LSL outlet per sensor (module docstring):
+    ``mocapkit-imu-<sensor>``, type ``IMU``, 6 channels (gyroscope [rad/s], accelerometer
+    [m/s^2]) or 9 with ``with_mag`` (and the magnetometer [uT], NaN where a sample has
+    none), the layout :func:`record_imu` and other LSL IMU consumers read. Each sample is
+    stamped with its sensor's clock, put on LSL's clock at that sensor's first sample (the
+    sensor's own spacing, not the network's jitter); a sensor without a clock (NaN) is
+    stamped when pushed. ``push(samples)`` takes a batch of ``SuitSample`` (orientation
+    samples and unknown sensors are skipped) and returns the samples pushed."""
+
+    def __init__(self, sensors: Mapping[int, str], rate_hz: float, with_mag: bool) -> None:
+        lsl = pylsl()
+        self._clock = lsl.local_clock
+        axes = ("gyr", "acc", "mag") if with_mag else ("gyr", "acc")
+        labels = [f"{a}_{c}" for a in axes for c in "xyz"]
+        self.outlets = {sid: _outlet(lsl, f"mocapkit-imu-{name}", "IMU", labels, rate_hz)
+                        for sid, name in sensors.items()}  # fmt: skip
+        self.with_mag = with_mag
+        self._offset: dict[int, float] = {}
+        self._nan3 = [float("nan")] * 3
+        self.pushed = 0
+
+    def push(self, samples: Sequence[Any]) -> int:
+        n = 0
+        for s in samples:
+            outlet = self.outlets.get(s.sensor_id)
+            if outlet is None or s.gyr is None or s.acc is None:
+                continue
+            row = [*s.gyr, *s.acc]
+            if self.with_mag:
+                row += list(s.mag) if s.mag is not None else self._nan3
+            t_s = s.t_sensor_s
+            if t_s == t_s:  # the sensor's clock, anchored to LSL's at its first sample
+                off = self._offset.get(s.sensor_id)
+                if off is None:
+                    off = self._offset[s.sensor_id] = self._clock() - t_s
+                outlet.push_sample(row, t_s + off)
+            else:
+                outlet.push_sample(row, self._clock())
+            n += 1
+        self.pushed += n
+        return n
 
 
 def record_imu(name: str, seconds: float, *, resolve_timeout_s: float = 5.0) -> ImuRecording:

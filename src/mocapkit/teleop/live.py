@@ -161,6 +161,9 @@ class LiveSession:
         self._last_command: Any = None
         self._message = ""
         self.frame_listeners: list[Callable[[Frame], None]] = []
+        # called with every batch of suit samples once the pipeline has taken it (raw
+        # samples to LSL: after the commands, never before them)
+        self.batch_listeners: list[Callable[[list[SuitSample]], None]] = []
         """Called with every processed frame on the receiver's thread (keep them short:
         e.g. an LSL outlet's push)."""
         self.sample_filter: Callable[[list[SuitSample]], list[SuitSample]] | None = None
@@ -339,6 +342,8 @@ class LiveSession:
         if self.sample_filter is not None and samples:
             samples = self.sample_filter(samples)
         self.pipeline.process(samples, now_ns)
+        for listener in self.batch_listeners:
+            listener(samples)
         now = time.monotonic()
         if now - self._snap_t >= _SNAPSHOT_PERIOD_S:
             self._snap_t = now

@@ -56,7 +56,8 @@ class RunOptions:
         record: an MCAP file for the session.
         foxglove_port: serve the session to Foxglove (WebSocket) on this loopback port
             (0: any free one), or None.
-        lsl: LSL outlets of the joint angles and the sensor orientations
+        lsl: LSL outlets of the joint angles, the sensor orientations and, with host-side
+            fusion, each sensor's raw samples
             (:mod:`mocapkit.io.lsl`).
         ros2_zenoh: Zenoh endpoints of a ROS 2 (rmw_zenoh) router to publish the joint
             states to (:mod:`mocapkit.io.ros2_zenoh`; empty: Zenoh's scouting), or None.
@@ -194,8 +195,16 @@ def _lsl_outlets(live: LiveSession) -> None:
     outlets = SessionOutlets(tree.coordinate_names, tree.sensor_names,
                              live.config.pipeline.rate_hz)  # fmt: skip
     live.frame_listeners.append(lambda f: outlets.push(f.angles, live.pipeline.q_sensor))
-    print("teleop run: LSL outlets mocapkit-joint-angles and mocapkit-orientations",
-          file=sys.stderr, flush=True)  # fmt: skip
+    names = ["mocapkit-joint-angles", "mocapkit-orientations"]
+    cfg = live.config.pipeline
+    if cfg.fusion == "host":  # the suit sends raw samples: each sensor's to its own outlet
+        from mocapkit.io.lsl import RawOutlets
+
+        ids = live.pipeline.sensor_ids
+        raw = RawOutlets({sid: name for name, sid in ids.items()}, cfg.rate_hz, cfg.use_mag)
+        live.batch_listeners.append(raw.push)
+        names.append(f"mocapkit-imu-<sensor> ({', '.join(ids)})")
+    print(f"teleop run: LSL outlets {', '.join(names)}", file=sys.stderr, flush=True)
 
 
 def _ros2_topics(live: LiveSession, connect: tuple[str, ...]) -> Any:
