@@ -163,7 +163,7 @@ class LiveSession:
         self.frame_listeners: list[Callable[[Frame], None]] = []
         # called with every batch of suit samples once the pipeline has taken it (raw
         # samples to LSL: after the commands, never before them)
-        self.batch_listeners: list[Callable[[list[SuitSample]], None]] = []
+        self.batch_listeners: list[Callable[[list[SuitSample]], object]] = []
         """Called with every processed frame on the receiver's thread (keep them short:
         e.g. an LSL outlet's push)."""
         self.sample_filter: Callable[[list[SuitSample]], list[SuitSample]] | None = None
