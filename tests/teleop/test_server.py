@@ -165,3 +165,38 @@ def test_server_that_stops_answering_is_detected_and_recovered():
         finally:
             srv.resume()
         assert _wait(lambda: tick() is None and s.state == State.ENGAGED)
+
+
+def test_server_cli_json_summary_on_exit() -> None:
+    """``mocapkit teleop server --json``: READY on stderr, one JSON object on stdout when
+    it stops, counting what it accepted, refused and dropped."""
+    import json
+    import socket
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "mocapkit", "teleop", "server", "--port", "0", "--max-seconds",
+         "3", "--json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        line = ""
+        while not line.startswith("READY"):
+            line = proc.stderr.readline()  # type: ignore[union-attr]
+            assert line, "the server exited before READY"
+        port = int(line.split()[1])
+        far = np.array([5.0, 5.0, 5.0])
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.sendto(proto.encode_command(1, 0, far, np.array([1.0, 0, 0, 0])), ("127.0.0.1", port))
+            s.sendto(b"garbage", ("127.0.0.1", port))
+            out, _ = proc.communicate(timeout=20)
+    finally:
+        proc.kill()
+    summary = json.loads(out)
+    assert summary["robot"] == "robonaut2-right"
+    assert summary["commands_refused"] == 1  # 5 m away and not synchronised: the gate
+    assert summary["commands_accepted"] == 0
+    assert summary["datagrams_dropped"] == 1
+    assert summary["reports_sent"] > 0
+    assert summary["client"].startswith("127.0.0.1:")

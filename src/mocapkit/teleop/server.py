@@ -252,9 +252,11 @@ def serve(
     max_seconds: float | None = None,
     parent_pid: int | None = None,
     key: bytes | None = None,
-) -> None:
+) -> dict[str, Any]:
     """Run the robot on a bound UDP socket until SIGTERM/SIGINT, ``max_seconds``, or the
-    parent process (``parent_pid``) going away.
+    parent process (``parent_pid``) going away; returns what happened (seconds served,
+    the paired client, commands accepted and refused by the gate, datagrams dropped,
+    reports sent, the gate's last state).
 
     The first client whose datagram is valid is paired: datagrams from any other address
     are dropped until the paired one has been silent for ``PAIR_TIMEOUT_S`` (a restarted
@@ -279,6 +281,7 @@ def serve(
     client_seen = -math.inf
     last_seq = -1
     seq = 0
+    sent = 0
     while not stop:
         now = time.monotonic()
         if max_seconds is not None and now - start > max_seconds:
@@ -328,9 +331,21 @@ def serve(
             try:
                 report = sim.report(seq, time.monotonic_ns())
                 sock.sendto(report if key is None else proto.sign(report, key), client)
+                sent += 1
             except OSError as exc:  # the client went away: keep serving
                 log.debug("report to %s failed: %s", client, exc)
             next_report = max(next_report + report_period, now)
+    st = sim.state
+    return {
+        "seconds": round(time.monotonic() - start, 3),
+        "client": None if client is None else f"{client[0]}:{client[1]}",
+        "commands_accepted": st.accepted,
+        "commands_refused": st.rejected,
+        "datagrams_dropped": st.malformed,
+        "reports_sent": sent,
+        "gate": st.gate.name.lower(),
+        "reason": st.reason.name.lower(),
+    }
 
 
 #: [s] the paired client may be replaced by another address after this much silence.
@@ -421,6 +436,13 @@ def config_args(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--max-seconds", type=float, default=None, help="stop after this long")
     parser.add_argument(
+        "--json",
+        action="store_true",
+        help="on exit, one JSON object on stdout: seconds, the paired client, commands "
+        "accepted and refused by the gate, datagrams dropped, reports sent (READY goes to "
+        "stderr)",
+    )
+    parser.add_argument(
         "--key-file",
         default=None,
         help="shared key for signed datagrams (required off loopback; the host's "
@@ -469,10 +491,16 @@ def run_from_args(args: argparse.Namespace, parent_pid: int | None = None) -> in
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
         sock.bind((args.host, args.port))
-        print(f"READY {sock.getsockname()[1]}", flush=True)
-        serve(sim, sock, args.max_seconds, parent_pid, key)
+        # with --json stdout holds only the summary: READY goes to stderr
+        out = sys.stderr if getattr(args, "json", False) else sys.stdout
+        print(f"READY {sock.getsockname()[1]}", file=out, flush=True)
+        summary = serve(sim, sock, args.max_seconds, parent_pid, key)
     finally:
         sock.close()
+    if getattr(args, "json", False):
+        from mocapkit.cli.common import print_json
+
+        print_json({"robot": args.robot, **summary})
     return 0
 
 
