@@ -62,3 +62,24 @@ def test_certificates_never_hide_a_collision(robot: str) -> None:
     assert hits > 0  # the paths do reach collisions
     if robot == "romeo":  # its fingers' hulls touch all along: certificates spare tests
         assert coll.certified > 0
+
+
+def test_a_robot_without_meshes_answers_no_collision(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A URDF whose meshes cannot be found (copied away from its package): the guard is
+    not available, says why, and asking it is safe (nothing found, nothing raised)."""
+    import yaml
+
+    spec = load_robot_spec("g1")
+    urdf = tmp_path / "g1.urdf"
+    urdf.write_text(spec.urdf.read_text())  # its meshes stay behind
+    from mocapkit.retarget.robot_spec import packaged_robots
+
+    data = yaml.safe_load(packaged_robots()["g1"].read_text())
+    data["urdf"] = str(urdf)
+    (tmp_path / "g1.yaml").write_text(yaml.safe_dump(data))
+    h = build_humanoid(load_robot_spec(tmp_path / "g1.yaml"))
+    coll = SelfCollision(h)
+    assert not coll.available
+    assert coll.reason
+    assert not coll.any_colliding(h.q_ref)
+    assert coll.colliding_pairs(h.q_ref) == []

@@ -37,6 +37,12 @@ class SelfCollision:
         import pinocchio as pin
 
         self.robot = robot
+        # pair -> (B's placement in A's frame, the meshes' distance there less a margin):
+        # a pair whose hulls touch and whose meshes were that far apart cannot intersect
+        # while B moves less than that relative to A (exact: no collision is missed)
+        self._certificates: dict[int, tuple[FloatArray, float]] = {}
+        self.certified = 0  # mesh tests a certificate spared
+        self._known: dict[bytes, list[int]] = {}  # configuration -> colliding pairs
         urdf = str(robot.spec.urdf)
         dirs = [urdf.split("share/example-robot-data")[0] + "share"] if "share/" in urdf else []
         dirs.append(str(robot.spec.urdf.parent))
@@ -151,12 +157,6 @@ class SelfCollision:
             hm.addCollisionPair(pin.CollisionPair(int(a), int(b)))
         self.hm = hm
         self.hd = hm.createData()
-        # pair -> (B's placement in A's frame, the meshes' distance there less a margin):
-        # a pair whose hulls touch and whose meshes were that far apart cannot intersect
-        # while B moves less than that relative to A (exact: no collision is missed)
-        self._certificates: dict[int, tuple[FloatArray, float]] = {}
-        self.certified = 0  # mesh tests a certificate spared
-        self._known: dict[bytes, list[int]] = {}  # configuration -> colliding pairs
         for req in self.hd.collisionRequests:
             req.security_margin = HULL_MARGIN_M
 
