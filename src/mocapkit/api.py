@@ -186,13 +186,12 @@ def body_angles(
     """
     import warnings
 
-    from mocapkit.body.pipeline import run_body
+    from mocapkit.body.pipeline import default_heading_alignment, run_body
     from mocapkit.body.recordings import load_orientations, read_raw, recording_format
     from mocapkit.body.sensor_tree import SensorTree
 
     body_tree = SensorTree.from_yaml(tree) if tree else SensorTree.preset(preset)
-    if heading_alignment is None:
-        heading_alignment = "joints" if (filter and mode == "6d") else "shared"
+    heading_alignment = heading_alignment or default_heading_alignment(filter, mode)
     raw = None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -264,8 +263,8 @@ class RobotMotion:
         for k in range(self.base.shape[1]):
             cols[names[k]] = self.base[:, k]
         for k, name in enumerate(self.joint_names):
-            prismatic = "P" in model.joints[model.getJointId(name)].shortname().replace(
-                "JointModel", "")[:2]  # fmt: skip
+            kind = model.joints[model.getJointId(name)].shortname().removeprefix("JointModel")
+            prismatic = kind.startswith("P")  # PX, PY, PZ, PrismaticUnaligned
             cols[f"{name}_{'m' if prismatic else 'rad'}"] = self.q[:, k]
         return pd.DataFrame(cols, index=pd.Index(self.time, name="time_s"))
 

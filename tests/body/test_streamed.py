@@ -116,8 +116,10 @@ def test_time_going_back_across_pieces_names_the_row(tmp_path: Path) -> None:
     start = lines.index("endheader") + 2
     lines[start + 150], lines[start + 149] = lines[start + 149], lines[start + 150]
     path.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "angles.mot"
     with pytest.raises(DataError, match="row 150"):
-        streamed.stream_body(tree, path, rows=150)
+        streamed.stream_body(tree, path, output=out, rows=150)
+    assert not out.exists()  # the rows before the bad one are not left as a result
 
 
 def test_no_still_pose_at_the_start_names_the_fix(tmp_path: Path) -> None:

@@ -112,19 +112,12 @@ def test_controller_joints_must_be_the_models() -> None:
         link.send_command(np.eye(4))
 
 
-def test_g1_follows_the_operator_through_a_ros2_robot(tmp_path) -> None:
-    """The live chain (simulated suit process, body model, retargeting, HumanoidSession)
-    with the ROS 2 link: the session aligns from the robot's /joint_states (all zeros)
-    and then follows; while engaged the robot's right shoulder moves with the operator's
-    arm, its left arm does not."""
-    pytest.importorskip("pinocchio")
+def _vertical_stroke():  # type: ignore[no-untyped-def]
+    """The operator's vertical shape (the paper's two arm sensors, IDs 1 and 2) and the
+    simulated suit's datagrams for it."""
     from mocapkit.body.sensor_tree import SensorTree
-    from mocapkit.teleop.live import LiveConfig, LiveSession
     from mocapkit.teleop.operator import operator_motion
     from mocapkit.teleop.operator_suit import SuitSetup, suit_timeline
-    from mocapkit.teleop.pipeline import PipelineConfig
-    from mocapkit.teleop.sender import TimelineSender
-    from tests.teleop.test_live import _sleep_until
 
     motion = operator_motion(
         "vertical", SensorTree.preset("right_arm_2"), calib_s=2.0, reach_s=1.2,
@@ -132,6 +125,21 @@ def test_g1_follows_the_operator_through_a_ros2_robot(tmp_path) -> None:
     )  # fmt: skip
     items, _ = suit_timeline(motion, SuitSetup(), {"upper_arm_r": 1, "forearm_r": 2},
                              np.random.default_rng(0))  # fmt: skip
+    return motion, items
+
+
+def test_g1_follows_the_operator_through_a_ros2_robot(tmp_path) -> None:
+    """The live chain (simulated suit process, body model, retargeting, HumanoidSession)
+    with the ROS 2 link: the session aligns from the robot's /joint_states (all zeros)
+    and then follows; while engaged the robot's right shoulder moves with the operator's
+    arm, its left arm does not."""
+    pytest.importorskip("pinocchio")
+    from mocapkit.teleop.live import LiveConfig, LiveSession
+    from mocapkit.teleop.pipeline import PipelineConfig
+    from mocapkit.teleop.sender import TimelineSender
+    from tests.teleop.test_live import _sleep_until
+
+    motion, items = _vertical_stroke()
     robots: list[FakeRobot] = []
 
     def make_link(pipeline) -> Ros2RobotLink:  # type: ignore[no-untyped-def]
@@ -258,20 +266,12 @@ def test_the_arm_follows_the_operator_through_its_own_ik() -> None:
     engaged the arm's hand traces the operator's vertical shape from where it was (up and
     down by more than 10 cm), every target in the arm's base frame."""
     pytest.importorskip("pinocchio")
-    from mocapkit.body.sensor_tree import SensorTree
     from mocapkit.teleop.live import LiveConfig, LiveSession
-    from mocapkit.teleop.operator import operator_motion
-    from mocapkit.teleop.operator_suit import SuitSetup, suit_timeline
     from mocapkit.teleop.pipeline import PipelineConfig
     from mocapkit.teleop.sender import TimelineSender
     from tests.teleop.test_live import _sleep_until
 
-    motion = operator_motion(
-        "vertical", SensorTree.preset("right_arm_2"), calib_s=2.0, reach_s=1.2,
-        settle_s=0.6, shape_s=5.0, hold_s=0.5, heading_rad=0.7,
-    )  # fmt: skip
-    items, _ = suit_timeline(motion, SuitSetup(), {"upper_arm_r": 1, "forearm_r": 2},
-                             np.random.default_rng(0))  # fmt: skip
+    motion, items = _vertical_stroke()
     frame = "r2/right_base"
     arms: list[FakeArm] = []
 

@@ -33,10 +33,14 @@ from mocapkit.body.calibration_checks import CalibrationFinding, warn_calibratio
 from mocapkit.body.functional import MAX_MOTION_S
 from mocapkit.body.joint_angles import log_gimbal
 from mocapkit.body.kinematics import BodyStream
-from mocapkit.body.pipeline import calibrate, calibration_summary, findings_summary
+from mocapkit.body.pipeline import (
+    calibrate,
+    calibration_summary,
+    findings_summary,
+    placement_source,
+)
 from mocapkit.body.plausibility import Finding, RangeTally, warn_findings
 from mocapkit.body.sensor_tree import SensorTree
-from mocapkit.body.timebase import align_orientations
 from mocapkit.errors import DataError
 from mocapkit.series import OrientationSeries
 
@@ -252,11 +256,7 @@ def stream_body(
     if isinstance(calibration, BodyCalibration):
         cal = calibration
     elif placement is not None:
-        tree.check_sensors(list(placement))
-        source = align_orientations({s.sensor: placement[s.sensor] for s in tree.segments})
-        if window is None:
-            t0 = float(source[tree.segments[0].sensor].time[0])
-            window = (t0, t0)
+        source, window = placement_source(tree, placement, window)
         cal = calibrate(tree, source, calibration=calibration, window=window, **calibrate_kwargs)
         checks = warn_calibration(tree, cal)
     else:
@@ -280,6 +280,7 @@ def stream_body(
                               "orientations", csv=False)
         if segments_output else None
     )  # fmt: skip
+    written = [Path(o) for o in (output, segments_output) if o]
     try:
         for t, q in itertools.chain(head or [first], pieces):
             values, q_seg, flags = stream.run(t, q)
@@ -288,13 +289,18 @@ def stream_body(
                 mot.write(t, values)
             if seg is not None:
                 seg.write(t, q_seg)
-    finally:
-        if mot is not None:
-            mot.close()
-        if seg is not None:
-            seg.close()
-    if tally.frames < 2:
-        raise DataError(f"{path}: fewer than 2 samples between {start} and {stop} s")
+        if tally.frames < 2:
+            raise DataError(f"{path}: fewer than 2 samples between {start} and {stop} s")
+    except BaseException:  # a bad row further on: no half-written output is left behind
+        for w in (mot, seg):
+            if w is not None:
+                w.close()
+        for f in written:
+            f.unlink(missing_ok=True)
+        raise
+    for w in (mot, seg):
+        if w is not None:
+            w.close()
     findings = warn_findings(tally.ranges.findings())
     exact, close = tally.report_gimbal()
     summary = {

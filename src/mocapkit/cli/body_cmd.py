@@ -64,7 +64,7 @@ def _cmd_presets(args: argparse.Namespace) -> int:
 
 def _cmd_angles(args: argparse.Namespace) -> int:
     from mocapkit.body.calibration import BodyCalibration, HeadingFixed, HeadingFromSensor
-    from mocapkit.body.pipeline import run_body, summary
+    from mocapkit.body.pipeline import default_heading_alignment, run_body, summary
     from mocapkit.body.sensor_tree import SensorTree
 
     tree = SensorTree.from_yaml(args.tree) if args.tree else SensorTree.preset(args.preset)
@@ -76,13 +76,7 @@ def _cmd_angles(args: argparse.Namespace) -> int:
     if args.map:
         tree = tree.with_sensor_names(_parse_map(args.map))
     fmt = recording_format(Path(args.recording), args.format)
-    alignment = args.heading_alignment
-    if alignment is None:
-        # 6D: each sensor has its own heading, kept consistent by the joints. 9D and a
-        # device's orientations: one shared heading (joints would also take out the
-        # few degrees between 9D sensors in the closed loop, but on the x-IMU3
-        # recording they move the hips 14 deg from what two 9D filters agree on)
-        alignment = "joints" if (args.filter and args.mode == "6d") else "shared"
+    alignment = args.heading_alignment or default_heading_alignment(args.filter, args.mode)
     # an orientation table goes through in pieces (flat memory for an hour); the BVH and
     # the joint-heading pass need the whole recording
     streamed = (

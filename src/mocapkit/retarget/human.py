@@ -106,16 +106,21 @@ def _on_the_ground(
     the ankle's height) and its neutral pose standing on z = 0."""
     feet = [p[:, 2] for s, p in pos.items() if s.startswith("foot")]
     ground = float(np.nanpercentile(np.concatenate(feet), 2.0)) - ANKLE_HEIGHT_M if feet else 0.0
-    soles = [p[2] for s, p in n_pos.items() if s.startswith(("foot", "toes"))]
-    sole = (min(soles) - ANKLE_HEIGHT_M) if soles else -ANKLE_HEIGHT_M
     return HumanMotion(
         time=time,
         pos={s: p - [0.0, 0.0, ground] for s, p in pos.items()},
         quat=quat,
-        neutral_pos={s: p - [0.0, 0.0, sole] for s, p in n_pos.items()},
+        neutral_pos=_standing(n_pos),
         neutral_quat=n_quat,
         source=source,
     )
+
+
+def _standing(n_pos: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
+    """The neutral pose's segment positions with its soles on z = 0."""
+    soles = [p[2] for s, p in n_pos.items() if s.startswith(("foot", "toes"))]
+    sole = (min(soles) - ANKLE_HEIGHT_M) if soles else -ANKLE_HEIGHT_M
+    return {s: p - [0.0, 0.0, sole] for s, p in n_pos.items()}
 
 
 @lru_cache(maxsize=1)
@@ -206,9 +211,7 @@ class FrameSkeleton:
         self._rows = [names.index(inverse[s]) for s in segments]
         self._feet = [k for k, s in enumerate(segments) if s.startswith("foot")]
         n_pos = {s: neutral[inverse[s]].pos[0] for s in segments}  # type: ignore[attr-defined]
-        soles = [p[2] for s, p in n_pos.items() if s.startswith(("foot", "toes"))]
-        sole = (min(soles) - ANKLE_HEIGHT_M) if soles else -ANKLE_HEIGHT_M
-        self._neutral_pos = {s: p - [0.0, 0.0, sole] for s, p in n_pos.items()}
+        self._neutral_pos = _standing(n_pos)
         self._neutral_quat = {s: neutral[inverse[s]].quat[0] for s in segments}  # type: ignore[attr-defined]
         n = len(tree.segments)
         self._values = np.zeros(len(self.coordinate_names))
