@@ -49,6 +49,7 @@ MODULES = (
     "mocapkit.body.streamed",
     "mocapkit.body.identify",
     "mocapkit.markers.reconstruct",
+    "mocapkit.markers.streamed",
     "mocapkit.retarget.robot_spec",
     "mocapkit.retarget.run",
     "mocapkit.retarget.live",

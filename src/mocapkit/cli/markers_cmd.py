@@ -233,14 +233,14 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(func=lambda a: parser.print_help() or 2)
 
 
-def _run(args: argparse.Namespace) -> Any:
+def _options(args: argparse.Namespace) -> Any:
     from mocapkit.markers.ik import IKParams
     from mocapkit.markers.osc import OSCParams
-    from mocapkit.markers.reconstruct import ReconstructionOptions, run
+    from mocapkit.markers.reconstruct import ReconstructionOptions
 
     if args.substeps < 1:
         raise ConfigError(f"--substeps: expected >= 1, got {args.substeps}")
-    options = ReconstructionOptions(
+    return ReconstructionOptions(
         method=args.method, mode=args.mode, grouping=args.grouping, units=args.units,
         up_axis=args.up_axis, fill_gaps=args.fill_gaps, max_gap_s=args.max_gap_s,
         lowpass_hz=args.lowpass_hz, start_s=args.start_s, end_s=args.end_s,
@@ -248,6 +248,12 @@ def _run(args: argparse.Namespace) -> Any:
         osc=OSCParams(substeps=args.substeps, backend=args.backend),
         ik=IKParams(backend=args.backend),
     )  # fmt: skip
+
+
+def _run(args: argparse.Namespace) -> Any:
+    from mocapkit.markers.reconstruct import run
+
+    options = _options(args)
     with StepProgress() as bars:  # on stderr, when it is a terminal
         return run(
             args.trial, args.static, args.markerset, args.height_m, args.mass_kg, options,
@@ -259,15 +265,21 @@ def _reconstruct(args: argparse.Namespace) -> int:
     suffix = args.output.suffix.lower()
     if suffix not in (".mot", ".csv"):
         raise ConfigError(f"-o {args.output}: expected a .mot or .csv file name")
+    from mocapkit.markers.streamed import reconstruct_streamed, streamable
+
+    options = _options(args)
+    if streamable(args.trial, options) is None:
+        # piece by piece at flat memory (the same numbers; mocapkit.markers.streamed)
+        with StepProgress() as bars:
+            streamed = reconstruct_streamed(
+                args.trial, args.static, args.markerset, args.height_m, args.mass_kg,
+                options, args.output, sex=args.sex, ik_setup=args.ik_setup,
+                tracked_trc=args.tracked_trc, tracked_c3d=args.tracked_c3d, progress=bars,
+            )  # fmt: skip
+        _side_files(args, streamed.subject)
+        return _print_figures(args, streamed.metrics)
     result, subject, _ = _run(args)
-    if args.save_markerset is not None:
-        from mocapkit.body.markersets import save_markerset
-
-        save_markerset(subject.markerset, args.save_markerset)
-    if args.osim is not None:
-        from mocapkit.io.osim_model import write_osim
-
-        write_osim(args.osim, subject.human)
+    _side_files(args, subject)
     if suffix == ".mot":
         result.write_mot(args.output)
     else:
@@ -276,7 +288,22 @@ def _reconstruct(args: argparse.Namespace) -> int:
         result.write_tracked_trc(args.tracked_trc)
     if args.tracked_c3d is not None:
         result.write_tracked_c3d(args.tracked_c3d)
-    m = result.metrics()
+    return _print_figures(args, result.metrics())
+
+
+def _side_files(args: argparse.Namespace, subject: Any) -> None:
+    """--save-markerset and --osim."""
+    if args.save_markerset is not None:
+        from mocapkit.body.markersets import save_markerset
+
+        save_markerset(subject.markerset, args.save_markerset)
+    if args.osim is not None:
+        from mocapkit.io.osim_model import write_osim
+
+        write_osim(args.osim, subject.human)
+
+
+def _print_figures(args: argparse.Namespace, m: dict[str, Any]) -> int:
     seconds = process_seconds()
     m["fps"] = round(m["frames"] / seconds, 1) if seconds > 0 else None
     m["seconds"] = round(seconds, 3)

@@ -23,11 +23,13 @@ from __future__ import annotations
 import logging
 import re
 import warnings
+from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
+from mocapkit._validate import FloatArray
 from mocapkit.errors import FileFormatError
 from mocapkit.io.units import length_scale
 from mocapkit.markers.trajectories import MarkerTrajectories
@@ -78,10 +80,12 @@ def _number(p: Path, header: dict[str, str], key: str, kind: type) -> Any:
         ) from None
 
 
-def _parse_data(p: Path, lines: list[str], first_line: int, width: int) -> np.ndarray:
+def _parse_data(
+    p: Path, lines: list[str], first_line: int, width: int, short: list[int]
+) -> np.ndarray:
     """(N, width) floats of the data rows (NaN for empty cells); rows with missing trailing
-    cells are padded (and reported), extra cells must be empty."""
-    short: list[int] = []
+    cells are padded (their line numbers appended to ``short``), extra cells must be
+    empty."""
     fixed: list[str] = []
     for offset, line in enumerate(lines):
         n = line.count("\t") + 1
@@ -100,15 +104,6 @@ def _parse_data(p: Path, lines: list[str], first_line: int, width: int) -> np.nd
         else:
             short.append(first_line + offset)
             fixed.append("\t".join(cells + [""] * (width - n)))
-    if short:
-        log.warning(
-            "%s: %d data rows have fewer than %d cells (first: line %d); their missing "
-            "trailing markers are read as gaps",
-            p,
-            len(short),
-            width,
-            short[0],
-        )
     block = _EMPTY_CELL.sub("\tnan", "\n".join(fixed))
     flat = np.empty(0)
     if len(block) > _KERNEL_PARSE_CHARS:
@@ -144,6 +139,191 @@ def _parse_data(p: Path, lines: list[str], first_line: int, width: int) -> np.nd
     raise FileFormatError(f"{p}: the data rows could not be read as numbers")
 
 
+_READ_BYTES = 8 << 20  # bytes read from the file at a time
+
+
+def _lines(f: Any) -> Iterator[bytes]:
+    """The lines of a binary file, ``\n``, ``\r\n`` or ``\r`` ended, read in blocks."""
+    rest = b""
+    while True:
+        chunk = f.read(_READ_BYTES)
+        if not chunk:
+            break
+        lines = (rest + chunk).splitlines()
+        rest = lines.pop() if lines and not chunk.endswith((b"\n", b"\r")) else b""
+        yield from lines
+    if rest:
+        yield rest
+
+
+class TrcStream:
+    """A TRC file opened for reading: its header at once, its data rows block by block
+    (:meth:`blocks`), so an hour-long trial never sits in memory as text.
+
+    Attributes:
+        names: the marker labels; rate_hz: ``DataRate``; scale: metres per file unit;
+        meta: as :func:`read_trc` returns it (before the time column is checked);
+        declared_frames: the header's ``NumFrames`` (None when absent).
+    """
+
+    def __init__(self, path: str | Path, units: str | None = None) -> None:
+        p = Path(path)
+        self.path = p
+        self._f = open(p, "rb")  # noqa: SIM115 (closed by close() / the last block)
+        if b"\x00" in self._f.read(4096):
+            self._f.close()
+            raise FileFormatError(f"{p}: not a text TRC file (binary content)")
+        self._f.seek(0)
+        self._it = _lines(self._f)
+        head: list[str] = []
+        for raw in self._it:
+            try:
+                head.append(raw.decode("utf-8"))
+            except UnicodeDecodeError:
+                head.append(raw.decode("latin-1"))  # a Windows path in the first line, say
+            if len(head) == 5:
+                break
+        try:
+            self._parse_header(p, head, units)
+        except BaseException:
+            self._f.close()
+            raise
+
+    def _parse_header(self, p: Path, lines: list[str], units: str | None) -> None:
+        if len(lines) < 5 or not lines[0].split() or lines[0].split()[0] != "PathFileType":
+            raise FileFormatError(
+                f"{p}: not a TRC file (the first line should start with 'PathFileType')"
+            )
+        header = _header(p, lines)
+        for key in ("DataRate", "NumMarkers", "Units"):
+            if key not in header or not header[key]:
+                raise FileFormatError(
+                    f"{p}: header field {key!r} missing on lines 2-3 (found: "
+                    f"{', '.join(header) or 'none'}); a TRC header names DataRate, "
+                    "CameraRate, NumFrames, NumMarkers, Units, OrigDataRate, "
+                    "OrigDataStartFrame, OrigNumFrames"
+                )
+        rate = _number(p, header, "DataRate", float)
+        n_markers = _number(p, header, "NumMarkers", int)
+        if not (np.isfinite(rate) and rate > 0):
+            raise FileFormatError(f"{p}: DataRate is {header['DataRate']}; expected a rate > 0 Hz")
+        self.scale = length_scale(units or header["Units"], f"{p}: Units")
+        labels = _cells(lines[3])
+        if len(labels) < 2 or labels[0] != "Frame#" or labels[1] != "Time":
+            raise FileFormatError(
+                f"{p}: line 4 should start with 'Frame#\\tTime', then the markers"
+            )
+        names = labels[2:]
+        if len(names) != n_markers:
+            raise FileFormatError(
+                f"{p}: header says NumMarkers={n_markers} but line 4 names {len(names)} markers"
+            )
+        seen: set[str] = set()
+        for n in names:
+            if n in seen:
+                raise FileFormatError(
+                    f"{p}: marker {n!r} is named twice on line 4; labels must be unique"
+                )
+            seen.add(n)
+        declared = header.get("NumFrames", "")
+        try:
+            self.declared_frames: int | None = int(float(declared)) if declared else None
+        except ValueError:
+            self.declared_frames = None
+        self.names = tuple(names)
+        self.rate_hz = float(rate)
+        self.meta: dict[str, Any] = {
+            "source": str(p),
+            "format": "trc",
+            "units": units or header["Units"],
+            "rate_hz": rate,
+            "up_axis": "y",
+            "up_axis_source": "TRC convention (OpenSim)",
+        }
+
+    def blocks(self, rows: int = 10_000) -> Iterator[tuple[FloatArray, FloatArray]]:
+        """``(time (n,), positions (n, M, 3) [m])`` of up to ``rows`` data rows at a time
+        (blank lines skipped; a row without a time named by its line)."""
+        width = 2 + 3 * len(self.names)
+        line_no = 5
+        block: list[str] = []
+        first = 0
+        short: list[int] = []
+        try:
+            for raw in self._it:
+                line_no += 1
+                text = raw.decode("latin-1")
+                if not text.strip():
+                    continue
+                if not block:
+                    first = line_no
+                block.append(text)
+                if len(block) == rows:
+                    yield self._block(block, first, width, short)
+                    block = []
+            if block:
+                yield self._block(block, first, width, short)
+        finally:
+            self.close()
+        if short:
+            log.warning(
+                "%s: %d data rows have fewer than %d cells (first: line %d); their missing "
+                "trailing markers are read as gaps",
+                self.path,
+                len(short),
+                width,
+                short[0],
+            )
+
+    def _block(
+        self, lines: list[str], first: int, width: int, short: list[int]
+    ) -> tuple[FloatArray, FloatArray]:
+        table = _parse_data(self.path, lines, first, width, short)
+        time = table[:, 1].copy()
+        if not np.isfinite(time).all():
+            bad = int(np.flatnonzero(~np.isfinite(time))[0])
+            raise FileFormatError(
+                f"{self.path}: the data row on line {first + bad} has no time; every row needs one"
+            )
+        pos = table[:, 2:].reshape(len(time), len(self.names), 3) * self.scale
+        return time, pos
+
+    def close(self) -> None:
+        self._f.close()
+
+
+def check_clock(p: Path, meta: dict[str, Any], frames: int, deviation: float, step: float) -> None:
+    """The time column against ``DataRate``: ``deviation`` the largest distance of a time
+    from ``time[0] + k / DataRate`` [s], ``step`` the column's median step. Another clock
+    (beyond a quarter frame): its step is used (``meta["rate_hz"]``), and said. A file with
+    fewer rows than ``meta["declared_frames"]`` (NumFrames) is said too."""
+    rate = float(meta["rate_hz"])
+    declared = meta.get("declared_frames")
+    if declared is not None and declared > frames:
+        meta["truncated"] = {"frames": frames, "declared": declared}
+        log.warning(
+            "%s: the header announces %d frames (NumFrames) but the file holds %d: it may be "
+            "cut short; only those %d frames are used",
+            p,
+            declared,
+            frames,
+            frames,
+        )
+    if frames > 2 and deviation > 0.25 / rate:  # not the same clock, not rounding
+        if step > 0:
+            meta["rate_hz"] = 1.0 / step
+            meta["declared_rate_hz"] = rate
+        log.warning(
+            "%s: DataRate says %g Hz but the time column advances %.6g s per frame "
+            "(%.6g Hz); the time column is used. Fix the header's DataRate if the file "
+            "was resampled",
+            p,
+            rate,
+            step,
+            1.0 / step if step > 0 else float("nan"),
+        )
+
+
 def read_trc(path: str | Path, units: str | None = None) -> MarkerTrajectories:
     """Read a TRC file.
 
@@ -155,99 +335,18 @@ def read_trc(path: str | Path, units: str | None = None) -> MarkerTrajectories:
         Trajectories in metres, file axes; ``meta`` holds ``source``, ``units`` (declared),
         ``rate_hz`` (``DataRate``) and ``up_axis="y"`` (the TRC convention; checked later).
     """
-    p = Path(path)
-    raw = p.read_bytes()
-    if b"\x00" in raw[:4096]:
-        raise FileFormatError(f"{p}: not a text TRC file (binary content)")
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")  # a Windows path in the first line, say
-    lines = text.splitlines()
-    if len(lines) < 5 or not lines[0].split() or lines[0].split()[0] != "PathFileType":
-        raise FileFormatError(
-            f"{p}: not a TRC file (the first line should start with 'PathFileType')"
-        )
-    header = _header(p, lines)
-    for key in ("DataRate", "NumMarkers", "Units"):
-        if key not in header or not header[key]:
-            raise FileFormatError(
-                f"{p}: header field {key!r} missing on lines 2-3 (found: "
-                f"{', '.join(header) or 'none'}); a TRC header names DataRate, CameraRate, "
-                "NumFrames, NumMarkers, Units, OrigDataRate, OrigDataStartFrame, OrigNumFrames"
-            )
-    rate = _number(p, header, "DataRate", float)
-    n_markers = _number(p, header, "NumMarkers", int)
-    if not (np.isfinite(rate) and rate > 0):
-        raise FileFormatError(f"{p}: DataRate is {header['DataRate']}; expected a rate > 0 Hz")
-    scale = length_scale(units or header["Units"], f"{p}: Units")
-    labels = _cells(lines[3])
-    if len(labels) < 2 or labels[0] != "Frame#" or labels[1] != "Time":
-        raise FileFormatError(f"{p}: line 4 should start with 'Frame#\\tTime', then the markers")
-    names = labels[2:]
-    if len(names) != n_markers:
-        raise FileFormatError(
-            f"{p}: header says NumMarkers={n_markers} but line 4 names {len(names)} markers"
-        )
-    seen: set[str] = set()
-    for n in names:
-        if n in seen:
-            raise FileFormatError(
-                f"{p}: marker {n!r} is named twice on line 4; labels must be unique"
-            )
-        seen.add(n)
-    start = 5
-    while start < len(lines) and not lines[start].strip():
-        start += 1
-    data_lines = [ln for ln in lines[start:] if ln.strip()]
-    if not data_lines:
-        raise FileFormatError(f"{p}: no data rows after the header")
-    table = _parse_data(p, data_lines, start + 1, 2 + 3 * n_markers)
-    time = table[:, 1].copy()
-    if not np.isfinite(time).all():
-        bad = int(np.flatnonzero(~np.isfinite(time))[0])
-        raise FileFormatError(f"{p}: data row {bad + 1} has no time; every row needs one")
-    pos = table[:, 2:].reshape(len(time), n_markers, 3) * scale
-    declared = header.get("NumFrames", "")
-    meta: dict[str, Any] = {
-        "source": str(p),
-        "format": "trc",
-        "units": units or header["Units"],
-        "rate_hz": rate,
-        "up_axis": "y",
-        "up_axis_source": "TRC convention (OpenSim)",
-    }
-    try:
-        n_declared = int(float(declared)) if declared else None
-    except ValueError:
-        n_declared = None
-    if n_declared is not None and n_declared > len(time):
-        meta["truncated"] = {"frames": len(time), "declared": n_declared}
-        log.warning(
-            "%s: the header announces %d frames (NumFrames) but the file holds %d: it may be "
-            "cut short; only those %d frames are used",
-            p,
-            n_declared,
-            len(time),
-            len(time),
-        )
-    if len(time) > 2:
-        regular = time[0] + np.arange(len(time)) / rate
-        if np.abs(time - regular).max() > 0.25 / rate:  # not the same clock, not rounding
-            step = float(np.median(np.diff(time)))
-            if step > 0:
-                meta["rate_hz"] = 1.0 / step
-                meta["declared_rate_hz"] = rate
-            log.warning(
-                "%s: DataRate says %g Hz but the time column advances %.6g s per frame "
-                "(%.6g Hz); the time column is used. Fix the header's DataRate if the file "
-                "was resampled",
-                p,
-                rate,
-                step,
-                1.0 / step if step > 0 else float("nan"),
-            )
-    return MarkerTrajectories(time, pos, tuple(names), meta=meta)
+    stream = TrcStream(path, units)
+    parts = list(stream.blocks(rows=50_000))
+    if not parts:
+        raise FileFormatError(f"{stream.path}: no data rows after the header")
+    time = np.concatenate([t for t, _ in parts])
+    pos = np.concatenate([x for _, x in parts])
+    meta = {**stream.meta, "declared_frames": stream.declared_frames}
+    regular = time[0] + np.arange(len(time)) / stream.rate_hz
+    step = float(np.median(np.diff(time))) if len(time) > 1 else 0.0
+    check_clock(stream.path, meta, len(time), float(np.abs(time - regular).max()), step)
+    del meta["declared_frames"]
+    return MarkerTrajectories(time, pos, stream.names, meta=meta)
 
 
 def write_trc(
@@ -263,7 +362,6 @@ def write_trc(
     given. Gaps are ``NaN`` cells (OpenSim 4 reads them as missing markers).
     """
     p = Path(path)
-    scale = 1.0 / length_scale(units, "units")
     traj = trajectories
     rate = (
         float(rate_hz)
@@ -274,29 +372,63 @@ def write_trc(
         raise FileFormatError(f"{p}: the frame rate is {rate}; a TRC file needs a rate > 0 Hz")
     regular = traj.time[0] + np.arange(traj.n_frames) / rate
     time = regular if np.allclose(traj.time, regular, rtol=0.0, atol=1e-6) else traj.time
-    out = [
-        f"PathFileType\t4\t(X/Y/Z)\t{p.name}",
-        "\t".join(_HEADER_KEYS),
-        "\t".join(
-            [
-                f"{rate:.10g}",
-                f"{rate:.10g}",
-                str(traj.n_frames),
-                str(traj.n_markers),
-                units,
-                f"{rate:.10g}",
-                "1",
-                str(traj.n_frames),
-            ]
-        ),
-        "\t".join(["Frame#", "Time", *[f"{n}\t\t" for n in traj.names]]),
-        "\t".join(["", "", *[f"X{i + 1}\tY{i + 1}\tZ{i + 1}" for i in range(traj.n_markers)]]),
-        "",
-    ]
-    data = traj.positions.reshape(traj.n_frames, -1) * scale
-    for f in range(traj.n_frames):
-        cells = [str(f + 1), f"{time[f]:.9f}"]
-        cells += ["NaN" if not np.isfinite(v) else f"{v:.6f}" for v in data[f]]
-        out.append("\t".join(cells))
-    p.write_text("\n".join(out) + "\n")
+    with TrcWriter(p, traj.names, rate, traj.n_frames, units) as w:
+        w.write(time, traj.positions)
     return p
+
+
+class TrcWriter:
+    """A TRC file written block by block (the frame count, which the header states, is
+    given up front): :func:`write_trc`'s layout, one C-level format per row."""
+
+    def __init__(
+        self, path: str | Path, names: Sequence[str], rate_hz: float, n_frames: int,
+        units: str = "mm",
+    ) -> None:  # fmt: skip
+        self.path = Path(path)
+        self.scale = 1.0 / length_scale(units, "units")
+        self.n_markers = len(names)
+        self.frames = 0
+        self.n_frames = n_frames
+        rate = float(rate_hz)
+        if not (np.isfinite(rate) and rate > 0):
+            raise FileFormatError(
+                f"{self.path}: the frame rate is {rate}; a TRC file needs a rate > 0 Hz"
+            )
+        m = self.n_markers
+        head = [
+            f"PathFileType\t4\t(X/Y/Z)\t{self.path.name}",
+            "\t".join(_HEADER_KEYS),
+            "\t".join([f"{rate:.10g}", f"{rate:.10g}", str(n_frames), str(m), units,
+                       f"{rate:.10g}", "1", str(n_frames)]),
+            "\t".join(["Frame#", "Time", *[f"{n}\t\t" for n in names]]),
+            "\t".join(["", "", *[f"X{i + 1}\tY{i + 1}\tZ{i + 1}" for i in range(m)]]),
+            "",
+        ]  # fmt: skip
+        self._f: IO[str] = open(self.path, "w")  # noqa: SIM115 (closed in close())
+        self._f.write("\n".join(head) + "\n")
+        self._fmt = "\t".join(["%d", "%.9f"] + ["%.6f"] * (3 * m))
+
+    def write(self, time: FloatArray, positions: FloatArray) -> None:
+        """Append frames: ``time`` (n,) [s], ``positions`` (n, M, 3) [m]."""
+        n = len(time)
+        data = np.asarray(positions, dtype=float).reshape(n, 3 * self.n_markers) * self.scale
+        rows = np.column_stack([np.arange(self.frames + 1, self.frames + n + 1), time, data])
+        text = "\n".join([self._fmt % tuple(r) for r in rows.tolist()])
+        self._f.write(text.replace("nan", "NaN") + "\n")
+        self.frames += n
+
+    def close(self) -> None:
+        if self._f.closed:
+            return
+        self._f.close()
+        if self.frames != self.n_frames:
+            raise FileFormatError(
+                f"{self.path}: {self.frames} frames written, the header says {self.n_frames}"
+            )
+
+    def __enter__(self) -> TrcWriter:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()

@@ -296,34 +296,76 @@ def reconstruct_offline(
             np.array([f.dq for f in frames]),
             np.array([f.error for f in frames]),
         )
-    pb = control_problem(
-        human, names, levels, coordinate_tasks, q0 if q_posture is None else q_posture, weights
+    tracker = OfflineTracker(
+        human, names, levels, coordinate_tasks, q0, rate_hz, q_posture, p, weights
     )
-    fm = pb.flat
     Xd, Xdd = target_derivatives(X, rate_hz)
     N = X.shape[0]
     parts: list[tuple[FloatArray, FloatArray, FloatArray, FloatArray]] = []
-    q, v = q0, np.zeros(human.nv)
     for a in range(0, N, BLOCK_FRAMES):
         b = min(N, a + BLOCK_FRAMES)
         lo_f = a - 1 if a > 0 else 0  # a block repeats the previous block's last frame
-        Qb, Pb, DQb, Eb, v = osc_trial(
-            fm.parent, fm.R0, fm.p0, fm.axis, fm.mass, fm.com, fm.inertia, fm.gravity,
-            fm.marker_joint, fm.marker_offset, q, v, X[lo_f:b], Xd[lo_f:b], Xdd[lo_f:b],
-            pb.row_weight, pb.level_ptr, pb.level_markers, pb.dof_ptr, pb.dof_markers,
-            pb.lock_dof, pb.lock_value, pb.lower, pb.upper, pb.q_posture, p.gains(rate_hz),
-            1.0 / rate_hz, p.substeps, a - lo_f,
-        )  # fmt: skip
-        parts.append((Qb, Pb, DQb, Eb))
-        q = Qb[-1]
+        parts.append(tracker.run(X[lo_f:b], Xd[lo_f:b], Xdd[lo_f:b], continues=a > 0))
         if progress is not None:
             progress(b, N)
-        if not np.isfinite(q).all():
-            break
     Q, P, DQ, E = (np.concatenate([part[k] for part in parts]) for k in range(4))
-    if not np.isfinite(Q).all():
-        bad = int(np.flatnonzero(~np.isfinite(Q).all(axis=1))[0])
-        raise DataError(
-            f"direct marker control diverged at frame {bad}; lower kappa or add substeps"
-        )
     return Q, P, DQ, E
+
+
+class OfflineTracker:
+    """Direct marker control over a trial given piece by piece (:func:`reconstruct_offline`
+    and the streamed reconstruction of :mod:`mocapkit.markers.streamed`): the state (q, v)
+    is carried from one piece to the next, so any cut gives the numbers of one call. Frame
+    0 starts at ``q_init`` at rest."""
+
+    def __init__(
+        self,
+        human: HumanModel,
+        names: Sequence[str],
+        levels: Sequence[Sequence[str]],
+        coordinate_tasks: Mapping[str, tuple[float, float]],
+        q_init: FloatArray,
+        rate_hz: float,
+        q_posture: FloatArray | None = None,
+        params: OSCParams | None = None,
+        weights: Mapping[str, float] | None = None,
+    ) -> None:
+        self.params = params or OSCParams()
+        if self.params.backend != "fast":
+            raise ConfigError("OfflineTracker runs the fast backend only")
+        q0 = np.asarray(q_init, dtype=float)
+        self.problem = control_problem(
+            human, names, levels, coordinate_tasks, q0 if q_posture is None else q_posture,
+            weights,
+        )  # fmt: skip
+        self.rate_hz = float(rate_hz)
+        self.gains = self.params.gains(rate_hz)
+        self.q, self.v = q0, np.zeros(human.nv)
+        self.frames = 0
+
+    def run(
+        self, X: FloatArray, Xd: FloatArray, Xdd: FloatArray, continues: bool
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The next frames: X, Xd, Xdd (n, M, 3) the markers and their derivatives
+        (:func:`target_derivatives` over the whole trial), preceded by the previous piece's
+        last frame when ``continues``; returns Q, tracked markers, ΔQ and marker errors of
+        the new frames."""
+        pb, fm, p = self.problem, self.problem.flat, self.params
+        Qb, Pb, DQb, Eb, v = osc_trial(
+            fm.parent, fm.R0, fm.p0, fm.axis, fm.mass, fm.com, fm.inertia, fm.gravity,
+            fm.marker_joint, fm.marker_offset, self.q, self.v,
+            np.ascontiguousarray(X, dtype=float), np.ascontiguousarray(Xd, dtype=float),
+            np.ascontiguousarray(Xdd, dtype=float),
+            pb.row_weight, pb.level_ptr, pb.level_markers, pb.dof_ptr, pb.dof_markers,
+            pb.lock_dof, pb.lock_value, pb.lower, pb.upper, pb.q_posture, self.gains,
+            1.0 / self.rate_hz, p.substeps, 1 if continues else 0,
+        )  # fmt: skip
+        bad = np.flatnonzero(~np.isfinite(Qb).all(axis=1))
+        if bad.size:
+            raise DataError(
+                f"direct marker control diverged at frame {self.frames + int(bad[0])}; lower "
+                "kappa or add substeps"
+            )
+        self.q, self.v = Qb[-1], v
+        self.frames += len(Qb)
+        return Qb, Pb, DQb, Eb

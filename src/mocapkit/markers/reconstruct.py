@@ -19,7 +19,7 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.body.anthropometry import Sex
 from mocapkit.body.markersets import MarkerSet, guess_markerset, load_markerset
-from mocapkit.body.scaling import Subject, scale_from_static
+from mocapkit.body.scaling import Subject
 from mocapkit.errors import ConfigError, DataError
 from mocapkit.markers import conventions
 from mocapkit.markers.bounds import joint_error_bounds
@@ -30,16 +30,14 @@ from mocapkit.markers.grouping import make_levels
 from mocapkit.markers.ik import IKParams, initial_root_pose, solve_ik
 from mocapkit.markers.osc import DirectMarkerController, OSCParams, reconstruct_offline
 from mocapkit.markers.result import ReconstructionResult
+from mocapkit.markers.subject import Warnings as _Warnings
+from mocapkit.markers.subject import check_static_is_not_trial, scaled_subject
 from mocapkit.markers.trajectories import MarkerTrajectories
 
 log = logging.getLogger(__name__)
 
 Method = Literal["osc", "ik"]
 Mode = Literal["offline", "online"]
-RIGID_PAIR_TOLERANCE_M = 0.015  # above: a warning (skin motion, a marker moved)
-RIGID_PAIR_REFUSE_M = 0.04  # above: another subject, or swapped labels
-STATIC_SPEED_REFUSE_M_S = 0.1  # a "static" trial whose stillest 0.5 s moves this fast
-DEFAULT_MASS_KG = 75.0
 
 
 @dataclass(frozen=True)
@@ -71,12 +69,6 @@ class ReconstructionOptions:
             raise ConfigError(f"mode: expected 'offline' or 'online', got {self.mode!r}")
 
 
-class _Warnings(list[str]):
-    def add(self, msg: str) -> None:
-        log.warning("%s", msg)
-        self.append(msg)
-
-
 def load_markers(path: str | Path, units: str | None = None) -> MarkerTrajectories:
     """Read a ``.c3d`` or ``.trc`` file (units override as given, else declared)."""
     from mocapkit.io.c3d import read_c3d
@@ -93,10 +85,16 @@ def load_markers(path: str | Path, units: str | None = None) -> MarkerTrajectori
     raise ConfigError(f"{p}: unknown marker file type {p.suffix!r}; expected .c3d or .trc")
 
 
-def _to_set_names(
-    traj: MarkerTrajectories, ms: MarkerSet, warnings: _Warnings, role: str
-) -> MarkerTrajectories:
-    """Keep the markers of the set (renamed to the set's spelling), warn about the rest."""
+def _set_columns(
+    traj: MarkerTrajectories,
+    ms: MarkerSet,
+    warnings: _Warnings,
+    role: str,
+    ever: np.ndarray | None = None,
+) -> tuple[tuple[str, ...], list[int]]:
+    """The markers of the set in the trial (the set's spelling) and their columns; warns
+    about the rest. ``ever`` (M,): which of the trial's markers appear at all, when
+    ``traj`` is only the start of a longer trial."""
     match = ms.match(traj.names)
     src = traj.meta.get("source", role)
     if not match.index:
@@ -111,8 +109,9 @@ def _to_set_names(
             "to a YAML marker set to use them"
         )
     names = [n for n in ms.names if n in match.index]
-    pos = traj.positions[:, [match.index[n] for n in names]]
-    never = [n for i, n in enumerate(names) if not np.isfinite(pos[:, i, 0]).any()]
+    cols = [match.index[n] for n in names]
+    seen = np.asarray(np.isfinite(traj.positions[:, :, 0]).any(axis=0) if ever is None else ever)
+    never = [n for n, c in zip(names, cols, strict=True) if not seen[c]]
     if never:
         warnings.add(
             f"{src}: markers {', '.join(never)} never appear (all frames missing); they are "
@@ -120,8 +119,81 @@ def _to_set_names(
         )
         keep = [i for i, n in enumerate(names) if n not in never]
         names = [names[i] for i in keep]
-        pos = pos[:, keep]
-    return MarkerTrajectories(traj.time, pos, tuple(names), meta=dict(traj.meta))
+        cols = [cols[i] for i in keep]
+    return tuple(names), cols
+
+
+def _to_set_names(
+    traj: MarkerTrajectories, ms: MarkerSet, warnings: _Warnings, role: str
+) -> MarkerTrajectories:
+    """Keep the markers of the set (renamed to the set's spelling), warn about the rest."""
+    names, cols = _set_columns(traj, ms, warnings, role)
+    return MarkerTrajectories(traj.time, traj.positions[:, cols], names, meta=dict(traj.meta))
+
+
+@dataclass(frozen=True)
+class Preparation:
+    """How a trial's frames, as read, become the reconstruction's: units corrected, the
+    marker set's columns under its names, z up (:func:`plan_preparation`)."""
+
+    units: conventions.UnitCheck
+    columns: tuple[int, ...]
+    names: tuple[str, ...]
+    up: str
+
+    def apply(self, traj: MarkerTrajectories) -> MarkerTrajectories:
+        t = conventions.apply_units(traj, self.units)
+        t = MarkerTrajectories(
+            t.time, t.positions[:, list(self.columns)], self.names, meta=dict(t.meta)
+        )
+        return conventions.to_z_up(t, self.up)
+
+
+def plan_preparation(
+    trial: MarkerTrajectories,
+    static: MarkerTrajectories | None,
+    ms: MarkerSet,
+    options: ReconstructionOptions,
+    warnings: _Warnings,
+    ever: np.ndarray | None = None,
+) -> tuple[Preparation, MarkerTrajectories, MarkerTrajectories | None]:
+    """Units, names and axes decided from the trial (or, with ``ever``, its start) and the
+    static trial; returns them, the trial prepared, and the static trial in metres, z-up,
+    named as in the set."""
+    explicit = options.units != "auto"
+    if static is not None:
+        s_check = conventions.check_units(static, explicit=explicit)
+        if s_check.message:
+            warnings.append(s_check.message)
+        static = conventions.apply_units(static, s_check)
+    check = conventions.check_units(trial, explicit=explicit)
+    if check.message:
+        warnings.append(check.message)
+    names, cols = _set_columns(conventions.apply_units(trial, check), ms, warnings, "trial", ever)
+    segments = {m.name: m.segment for m in ms.markers}
+    if static is not None:
+        static = _to_set_names(static, ms, warnings, "static trial")
+        reference = static
+    else:
+        reference = MarkerTrajectories(
+            trial.time, trial.positions[:, cols] * check.factor, names, meta=dict(trial.meta)
+        )
+    up = conventions.resolve_up_axis(reference, segments, options.up_axis)
+    if up != "z":
+        log.info("converting %s-up files to z-up", up)
+    prep = Preparation(check, tuple(cols), names, up)
+    prepared = prep.apply(trial)
+    if static is not None:
+        static = conventions.to_z_up(static, up)
+        # the trial must be z-up too: its own up direction must agree
+        found = conventions.detect_up_axis(prepared, segments)
+        if found is not None and found.axis != "z" and found.angle_deg < 45:
+            raise DataError(
+                f"{prepared.meta.get('source', 'trial')}: after the static trial's axis "
+                f"conversion ({up}-up) the trial's body points {found.axis}; the two files "
+                "use different axes. Fix: export both with the same axes (or pass --up-axis)"
+            )
+    return prep, prepared, static
 
 
 def prepare(
@@ -132,38 +204,7 @@ def prepare(
     warnings: _Warnings,
 ) -> tuple[MarkerTrajectories, MarkerTrajectories | None, CleaningReport]:
     """Units, axes, names, cleaning: both trials in metres, z-up, named as in the set."""
-    explicit = options.units != "auto"
-    for label, t in (("static", static), ("trial", trial)):
-        if t is None:
-            continue
-        check = conventions.check_units(t, explicit=explicit)
-        if check.message:
-            warnings.append(check.message)
-        if label == "static":
-            static = conventions.apply_units(t, check)
-        else:
-            trial = conventions.apply_units(t, check)
-    trial = _to_set_names(trial, ms, warnings, "trial")
-    segments = {m.name: m.segment for m in ms.markers}
-    reference = static if static is not None else trial
-    if static is not None:
-        static = _to_set_names(static, ms, warnings, "static trial")
-    up = conventions.resolve_up_axis(
-        static if static is not None else reference, segments, options.up_axis
-    )
-    if up != "z":
-        log.info("converting %s-up files to z-up", up)
-    trial = conventions.to_z_up(trial, up)
-    if static is not None:
-        static = conventions.to_z_up(static, up)
-        # the trial must be z-up too: its own up direction must agree
-        found = conventions.detect_up_axis(trial, segments)
-        if found is not None and found.axis != "z" and found.angle_deg < 45:
-            raise DataError(
-                f"{trial.meta.get('source', 'trial')}: after the static trial's axis conversion "
-                f"({up}-up) the trial's body points {found.axis}; the two files use different "
-                "axes. Fix: export both with the same axes (or pass --up-axis)"
-            )
+    _, trial, static = plan_preparation(trial, static, ms, options, warnings)
     if options.start_s is not None or options.end_s is not None:
         trial = trial.between(options.start_s, options.end_s)
     clusters = {
@@ -182,159 +223,6 @@ def prepare(
             "are left out of those frames (--fill-gaps and --max-gap-s fill short gaps)"
         )
     return trial, static, report
-
-
-ACROMION_HEIGHT_RATIO = 0.818  # acromion height / stature (Drillis & Contini; de Leva)
-_FEET = ("foot_r", "foot_l", "toes_r", "toes_l")
-_SHOULDERS = ("clavicle_r", "clavicle_l")
-
-
-def _extent(z: FloatArray) -> float | None:
-    """Median over frames of the vertical extent of the visible markers (z (N, M)), or
-    None when no frame shows two of them."""
-    seen = np.isfinite(z).sum(axis=1) >= 2
-    if not seen.any():
-        return None
-    zs = z[seen]
-    top = np.max(np.where(np.isfinite(zs), zs, -np.inf), axis=1)
-    bottom = np.min(np.where(np.isfinite(zs), zs, np.inf), axis=1)
-    return float(np.median(top - bottom))
-
-
-def estimate_height(
-    traj: MarkerTrajectories, ms: MarkerSet | None = None, warnings: _Warnings | None = None
-) -> float:
-    """Stature [m] from the markers (z-up).
-
-    With head and foot markers: the median vertical extent of the markers (the head markers
-    sit about a marker radius above the vertex, the foot markers about as far above the
-    floor). Without head markers but with shoulders and feet: the acromion height over
-    :data:`ACROMION_HEIGHT_RATIO` (a population ratio: a few centimetres either way), with
-    a loud warning. Otherwise (or without a marker set to tell): refused, pass --height-m.
-    """
-    from mocapkit.body.anthropometry import HEIGHT_RANGE_M
-
-    z = traj.positions[..., 2]
-    if ms is not None:
-        seg = {m.name: m.segment for m in ms.markers}
-        cols = {s: [i for i, n in enumerate(traj.names) if seg.get(n) in s]
-                for s in (("head",), _FEET, _SHOULDERS)}  # fmt: skip
-        head, feet, shoulders = (cols[("head",)], cols[_FEET], cols[_SHOULDERS])
-        if not feet or not (head or shoulders):
-            lacking = "foot" if not feet else "head or shoulder"
-            raise DataError(
-                f"cannot estimate the stature: the trial has no {lacking} markers (the "
-                "markers' height range would not be the body's); pass --height-m"
-            )
-        if not head:
-            with np.errstate(invalid="ignore"):
-                floor = np.nanmin(z[:, feet], axis=1)
-                acromion = np.nanmean(z[:, shoulders], axis=1) - floor
-            acromion = acromion[np.isfinite(acromion)]
-            if acromion.size == 0:
-                raise DataError(
-                    "cannot estimate the stature: no frame shows a shoulder and a foot "
-                    "marker together; pass --height-m"
-                )
-            h = float(np.median(acromion)) / ACROMION_HEIGHT_RATIO
-            if warnings is not None:
-                warnings.add(
-                    f"NO HEAD MARKERS: the stature ({h:.3f} m) is estimated from the "
-                    f"shoulder markers' height / {ACROMION_HEIGHT_RATIO} (a population ratio, "
-                    "+-4 %); segment lengths and masses scale with it. Pass --height-m"
-                )
-            if not (HEIGHT_RANGE_M[0] <= h <= HEIGHT_RANGE_M[1]):
-                raise DataError(
-                    f"cannot estimate the stature from the shoulder markers ({h:.2f} m); "
-                    "pass --height-m"
-                )
-            return h
-    extent = _extent(z)
-    if extent is None:
-        raise DataError(
-            "cannot estimate the stature: no frame shows two markers at once; pass --height-m"
-        )
-    h = extent
-    if not (HEIGHT_RANGE_M[0] <= h <= HEIGHT_RANGE_M[1]):
-        raise DataError(
-            f"cannot estimate the stature from the markers (vertical extent {h:.2f} m); "
-            "pass --height-m"
-        )
-    return h
-
-
-def check_static_matches(
-    static: MarkerTrajectories, trial: MarkerTrajectories, ms: MarkerSet, warnings: _Warnings
-) -> None:
-    """Markers on one rigid segment keep their distance: compare the static trial with the
-    trial (median over frames); a mismatch means another subject or relabelled markers."""
-    index_s = {n: i for i, n in enumerate(static.names)}
-    index_t = {n: i for i, n in enumerate(trial.names)}
-    by_seg: dict[str, list[str]] = {}
-    for m in ms.markers:
-        if m.name in index_s and m.name in index_t:
-            by_seg.setdefault(m.segment, []).append(m.name)
-    worst: tuple[float, str, str, float, float] | None = None
-    for names in by_seg.values():
-        for i, a in enumerate(names):
-            for b in names[i + 1 :]:
-                d_s = np.linalg.norm(static.marker(a) - static.marker(b), axis=1)
-                d_t = np.linalg.norm(trial.marker(a) - trial.marker(b), axis=1)
-                d_s, d_t = d_s[np.isfinite(d_s)], d_t[np.isfinite(d_t)]
-                if d_s.size == 0 or d_t.size == 0:
-                    continue
-                ds, dt = float(np.median(d_s)), float(np.median(d_t))
-                if worst is None or abs(ds - dt) > worst[0]:
-                    worst = (abs(ds - dt), a, b, float(ds), float(dt))
-    if worst is None or worst[0] <= RIGID_PAIR_TOLERANCE_M:
-        return
-    _, a, b, ds, dt = worst
-    what = (
-        f"markers {a} and {b} sit on one segment but are {ds * 1000:.0f} mm apart in the "
-        f"static trial and {dt * 1000:.0f} mm in the trial"
-    )
-    if worst[0] > RIGID_PAIR_REFUSE_M:
-        raise DataError(
-            f"the static trial does not match the trial: {what}. Use the same subject's "
-            "static trial (or fix swapped labels)"
-        )
-    warnings.add(
-        f"the static trial and the trial differ: {what} (a marker moved between them, or "
-        "skin motion); its registered offset may be off by that much"
-    )
-
-
-def check_static_still(static: MarkerTrajectories) -> None:
-    """Refuse a static trial that moves (a walking trial given as the static one): its
-    stillest 0.5 s would be scaled as a standing pose."""
-    from mocapkit.body.scaling import STATIC_WINDOW_S, static_speed
-
-    speed = static_speed(static.time, static.positions)
-    if speed > STATIC_SPEED_REFUSE_M_S:
-        raise DataError(
-            f"{static.meta.get('source', 'static trial')}: not a static trial: its stillest "
-            f"{STATIC_WINDOW_S:.1f} s still moves at {speed * 1000:.0f} mm/s (mean marker "
-            "speed). Pass a recording of the subject standing still, or omit --static to "
-            "estimate the limb lengths from the trial"
-        )
-
-
-def calibrate(
-    static: MarkerTrajectories | None,
-    trial: MarkerTrajectories,
-    ms: MarkerSet,
-    height_m: float,
-    mass_kg: float,
-    sex: Sex = "male",
-) -> Subject:
-    """A scaled subject from the static trial, or from the trial itself when there is none."""
-    if static is not None:
-        return scale_from_static(
-            static.names, static.time, static.positions, ms, height_m, mass_kg, sex
-        )
-    from mocapkit.body.scaling import estimate_scales_from_motion
-
-    return estimate_scales_from_motion(trial.names, trial.positions, ms, height_m, mass_kg, sex)
 
 
 def _initial_pose(
@@ -396,26 +284,16 @@ def reconstruct(
             progress("reconstruction", done, total)
 
     warn = _Warnings(warnings or [])
-    human, ms = subject.human, subject.markerset
-    tasks, notes = resolve_coordinate_tasks(human, ms.coordinate_tasks)
-    for note in notes:
-        log.info("%s", note)
-    names = [n for n in trial.names if n in human.markers]
-    unregistered = set(subject.report.get("unregistered_markers", ()))
+    human = subject.human
+    plan = plan_tracking(trial.names, subject, options)
+    names, weights, levels, tracked, tasks = (
+        plan.names,
+        plan.weights,
+        plan.levels,
+        plan.tracked,
+        plan.tasks,
+    )
     X = np.ascontiguousarray(trial.select(names).positions)
-    weights = np.array([ms.spec(n).weight for n in names])
-    if options.method == "osc":
-        segment_of = {n: human.markers[n][0] for n in names}
-        levels = make_levels(
-            options.grouping, names, ms, segment_of, dict(zip(names, weights, strict=True)),
-            human.segment_depth(),
-        )  # fmt: skip
-        tracked = [n for level in levels for n in level]
-    else:
-        levels = (tuple(n for n, w in zip(names, weights, strict=True) if w > 0),)
-        tracked = list(levels[0])
-    if not tracked:
-        raise DataError("no marker left to track; check the marker set and the trial's labels")
     first = int(np.argmax(np.isfinite(X[..., 0]).sum(axis=1) >= 3))
     if np.isfinite(X[first, :, 0]).sum() < 3:
         raise DataError("no frame has 3 visible markers; nothing can be reconstructed")
@@ -460,20 +338,67 @@ def reconstruct(
     result.meta["file_up_axis"] = trial.meta.get("converted_from_up_axis", "z")
     if trial.meta.get("c3d") is not None:
         result.meta["c3d"] = trial.meta["c3d"]
-    if not np.isfinite(result.coordinates[:, result.fitted_angles]).any():
+    check_tracking(bool(np.isfinite(result.coordinates[:, result.fitted_angles]).any()), plan, warn)
+    result.warnings[:] = list(warn)
+    return result
+
+
+@dataclass(frozen=True)
+class TrackingPlan:
+    """Which markers a reconstruction uses and how (:func:`plan_tracking`)."""
+
+    names: list[str]  # the trial's markers the model has
+    weights: FloatArray  # (M,) their weights
+    levels: tuple[tuple[str, ...], ...]  # priority levels (one for IK)
+    tracked: list[str]  # the markers in the levels
+    tasks: dict[str, Any]  # coordinate tasks, resolved on the model
+    unregistered: frozenset[str]  # markers the static trial did not place
+
+
+def plan_tracking(
+    trial_names: Sequence[str], subject: Subject, options: ReconstructionOptions
+) -> TrackingPlan:
+    """The markers, weights, priority levels and coordinate tasks of a reconstruction."""
+    human, ms = subject.human, subject.markerset
+    tasks, notes = resolve_coordinate_tasks(human, ms.coordinate_tasks)
+    for note in notes:
+        log.info("%s", note)
+    names = [n for n in trial_names if n in human.markers]
+    weights = np.array([ms.spec(n).weight for n in names])
+    levels: tuple[tuple[str, ...], ...]
+    if options.method == "osc":
+        segment_of = {n: human.markers[n][0] for n in names}
+        levels = tuple(tuple(level) for level in make_levels(
+            options.grouping, names, ms, segment_of, dict(zip(names, weights, strict=True)),
+            human.segment_depth(),
+        ))  # fmt: skip
+        tracked = [n for level in levels for n in level]
+    else:
+        levels = (tuple(n for n, w in zip(names, weights, strict=True) if w > 0),)
+        tracked = list(levels[0])
+    if not tracked:
+        raise DataError("no marker left to track; check the marker set and the trial's labels")
+    unregistered = frozenset(subject.report.get("unregistered_markers", ()))
+    return TrackingPlan(names, weights, levels, tracked, dict(tasks), unregistered)
+
+
+def check_tracking(any_fitted: bool, plan: TrackingPlan, warn: _Warnings) -> None:
+    """Refuse a reconstruction whose markers determine no joint angle (``any_fitted``: a
+    fitted angle is finite in some frame); warn about tracked markers the static trial
+    did not place."""
+    tracked = plan.tracked
+    if not any_fitted:
         raise DataError(
             f"the {len(tracked)} tracked markers ({', '.join(tracked[:8])}"
             f"{' ...' if len(tracked) > 8 else ''}) determine no joint angle of the model: "
             "its pelvis and trunk stay free. Track more markers (--grouping paper puts the "
             "paper's levels above all the others; the default is single)"
         )
-    if unregistered & set(tracked):
+    if plan.unregistered & set(tracked):
         warn.add(
-            f"markers {', '.join(sorted(unregistered & set(tracked)))} were not in the static "
-            "trial: their offsets are the marker set's generic guesses"
+            f"markers {', '.join(sorted(plan.unregistered & set(tracked)))} were not in the "
+            "static trial: their offsets are the marker set's generic guesses"
         )
-    result.warnings[:] = list(warn)
-    return result
 
 
 def apply_ik_setup(
@@ -572,12 +497,7 @@ def run(
     warn = _Warnings()
     trial = load_markers(trial_path, opts.units)
     static = load_markers(static_path, opts.units) if static_path is not None else None
-    if static_path is not None and Path(static_path).resolve() == Path(trial_path).resolve():
-        raise ConfigError(
-            f"--static {static_path} is the trial itself; a static trial is a separate "
-            "recording of the subject standing still. Pass it, or omit --static to estimate "
-            "the limb lengths from the trial"
-        )
+    check_static_is_not_trial(trial_path, static_path)
     if markerset is None:
         ms = choose_markerset(trial, warn)
     else:
@@ -585,33 +505,7 @@ def run(
     if ik_setup is not None:
         ms, opts = apply_ik_setup(ms, opts, ik_setup, warn)
     trial, static, cleaning = prepare(trial, static, ms, opts, warn)
-    if static is not None:
-        check_static_still(static)
-        check_static_matches(static, trial, ms, warn)
-    if height_m is None:
-        n_before = len(warn)
-        height_m = estimate_height(static if static is not None else trial, ms, warn)
-        if len(warn) == n_before:
-            warn.add(
-                f"no --height-m given: {height_m:.3f} m estimated from the markers' extent "
-                "(head to feet)"
-            )
-    if mass_kg is None:
-        mass_kg = DEFAULT_MASS_KG
-        warn.add(
-            f"no --mass-kg given: {mass_kg:.0f} kg assumed for the segment masses (they set "
-            "the simulated dynamics of direct marker control, not IK's angles)"
-        )
-    scale_static = static
-    if static is not None and ms.description.startswith("assigned automatically"):
-        warn.add(
-            "the marker set was assigned automatically, so its markers have no known place "
-            "on their segments to start a static registration from: the limb lengths and "
-            "marker places are estimated from the trial's motion; the static trial gave the "
-            "stature only"
-        )
-        scale_static = None
-    subject = calibrate(scale_static, trial, ms, height_m, mass_kg, sex)
+    subject = scaled_subject(trial, static, ms, height_m, mass_kg, sex, warn)
     result = reconstruct(trial, subject, opts, list(warn), progress)
     result.meta.update(
         {

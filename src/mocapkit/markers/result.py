@@ -21,12 +21,13 @@ import numpy as np
 
 from mocapkit._validate import FloatArray
 from mocapkit.body.human_model import HumanModel
-from mocapkit.markers.bounds import POORLY_DETERMINED_DEG_PER_MM, BoundReport, bound_report
+from mocapkit.markers.bounds import BoundReport, bound_report
 from mocapkit.markers.coordinates import (
     CoordinateMap,
     coordinate_map,
     coordinates_and_gimbal,
 )
+from mocapkit.markers.coverage import Coverage, MetricsTally
 from mocapkit.markers.determined import column_determined, dof_determined
 from mocapkit.markers.kinematics import MarkerKinematics
 
@@ -81,6 +82,8 @@ class ReconstructionResult:
     held: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     model_dof_names: tuple[str, ...] = ()
     model_dof_values: FloatArray | None = None
+    coverage: Coverage | None = None
+    root_angles_tail: FloatArray | None = None
 
     @classmethod
     def build(
@@ -102,18 +105,31 @@ class ReconstructionResult:
         with_total: bool = True,
         P: FloatArray | None = None,
         progress: Callable[[str, float, float], None] | None = None,
+        root_angles_before: FloatArray | None = None,
+        quiet: bool = False,
     ) -> ReconstructionResult:
         """Errors, named coordinates (NaN where undetermined) and the bound's report;
         ``weights`` (M,) of ``names`` (default 1) weigh the conditioning's fit;
         ``with_total``: also the bound that holds (``bound.total``); ``P`` (N, M, 3): the
-        model's markers at Q when the method already has them."""
+        model's markers at Q when the method already has them.
+
+        A piece of a longer trial: ``root_angles_before`` (3,) the pelvis rotations of the
+        frame before it (its ``root_angles_tail``), so they continue without a 2 pi jump;
+        ``quiet``: its :attr:`coverage` is not turned into warnings (the whole trial's
+        is, once)."""
         if P is None:
             P = marker_positions(human, names, Q)
         P = np.asarray(P, dtype=float).reshape(X.shape)
         errors = np.linalg.norm(P - X, axis=2)
         cmap = coordinate_map(human)
         coords, gimbal = coordinates_and_gimbal(human, Q, cmap)
-        coords = unwrap_in_time(coords, range(3, 6))  # a subject who turns: no +-180 jumps
+        # a subject who turns: no +-180 jumps
+        if root_angles_before is None:
+            coords = unwrap_in_time(coords, range(3, 6))
+        else:
+            coords = unwrap_in_time(np.vstack([root_angles_before_row(root_angles_before,
+                                    coords.shape[1]), coords]), range(3, 6))[1:]  # fmt: skip
+        tail = _last_finite(coords[:, 3:6])
         root, dofs = dof_determined(human, names, tracked, X, held=locked)
         det = column_determined(cmap, root, dofs)
         w = np.ones(len(names)) if weights is None else np.asarray(weights, dtype=float)
@@ -127,11 +143,13 @@ class ReconstructionResult:
         det = det & ~report.unobserved
         coords = np.where(det, coords, np.nan)
         t = np.asarray(time, dtype=float)
-        for msg in _coverage_warnings(
+        coverage = Coverage.of(
             cmap.names, structural, det, gimbal, report, t, _no_visible_frames(X, names, tracked)
-        ):
-            warnings.append(msg)
-            log.warning("%s", msg)
+        )
+        if not quiet:
+            for msg in coverage.warnings():
+                warnings.append(msg)
+                log.warning("%s", msg)
         cnames = cmap.names
         behind, behind_values = _dofs_behind(human, cmap, Q, coords)
         return cls(
@@ -157,7 +175,10 @@ class ReconstructionResult:
             ),
             model_dof_names=tuple(human.dof_names[i] for i in behind),
             model_dof_values=behind_values,
-        )
+            coverage=coverage,
+            root_angles_tail=tail if root_angles_before is None
+            else np.where(np.isfinite(tail), tail, root_angles_before),
+        )  # fmt: skip
 
     # -- figures ---------------------------------------------------------------------------
     @property
@@ -217,54 +238,22 @@ class ReconstructionResult:
         ``fps`` and ``seconds``): means and maxima over the frames where they exist (frames
         without a visible marker or a determined DOF are left out; None if there is none at
         all). ``solve_fps``: frames per second of the reconstruction loop alone."""
-        rms = self.frame_rms(markers)
-        e = self._errors_of(markers)
-        seen = np.isfinite(rms)
-        bound = np.abs(self.coordinate_bound[:, self.fitted_angles])
-        has = np.isfinite(bound)
-
-        def rounded(x: float | None, digits: int) -> float | None:
-            return None if x is None else round(float(x), digits)
-
-        out: dict[str, Any] = {
-            "frames": self.n_frames,
-            "solve_fps": round(float(self.fps), 1),
-            "marker_rms_mm": rounded(rms[seen].mean() * 1000 if seen.any() else None, 2),
-            "marker_max_mm": rounded(e[np.isfinite(e)].max() * 1000 if seen.any() else None, 2),
-            "joint_error_bound_deg_max": rounded(
-                np.degrees(bound[has].max()) if has.any() else None, 3
-            ),
-        }
-        if self.bound is not None and self.bound.total is not None:
-            tot = self.bound.total[:, self.fitted_angles]
-            fin = np.isfinite(tot)
-            out["joint_error_total_bound_deg_max"] = rounded(
-                np.degrees(tot[fin].max()) if fin.any() else None, 3
-            )
-        return out
+        tally = MetricsTally()
+        tally.add(self, markers)
+        return tally.metrics()
 
     def column(self, name: str) -> FloatArray:
         return self.coordinates[:, self.coordinate_names.index(name)]
 
     # -- files -----------------------------------------------------------------------------
     def _output_columns(self, with_model_dofs: bool = False) -> tuple[list[str], FloatArray]:
-        keep = [
-            k
-            for k in range(len(self.coordinate_names))
-            if np.isfinite(self.coordinates[:, k]).any()
-        ]
-        data = self.coordinates[:, keep].copy()
-        ang = self.angular[keep]
-        data[:, ang] = np.degrees(data[:, ang])
-        labels = [self.coordinate_names[k] for k in keep]
-        if with_model_dofs and self.model_dof_values is not None:
-            extra = [
-                i for i in range(len(self.model_dof_names))
-                if np.isfinite(self.model_dof_values[:, i]).any()
-            ]  # fmt: skip
-            labels += [self.model_dof_names[i] for i in extra]
-            data = np.column_stack([data, np.degrees(self.model_dof_values[:, extra])])
-        return labels, data
+        dofs = self.model_dof_values if with_model_dofs else None
+        keep = np.asarray(np.isfinite(self.coordinates).any(axis=0))
+        keep_dofs = None if dofs is None else np.asarray(np.isfinite(dofs).any(axis=0))
+        return output_columns(
+            self.coordinate_names, self.angular, self.coordinates, keep,
+            self.model_dof_names, dofs, keep_dofs,
+        )  # fmt: skip
 
     def write_mot(self, path: str | Path) -> Path:
         """OpenSim ``.mot`` (degrees, pelvis in OpenSim's y-up ground; see coordinates):
@@ -280,27 +269,21 @@ class ReconstructionResult:
     def write_csv(self, path: str | Path) -> Path:
         """CSV with unit suffixes (``_m``, ``_deg``); NaN where undetermined."""
         labels, data = self._output_columns()
-        ang = {c for c, a in zip(self.coordinate_names, self.angular, strict=True) if a}
-        header = ["time_s"] + [f"{c}_deg" if c in ang else f"{c}_m" for c in labels]
-        rows = np.column_stack([self.time, data])
         p = Path(path)
-        np.savetxt(p, rows, delimiter=",", header=",".join(header), comments="", fmt="%.8g")
+        with open(p, "w") as f:
+            f.write(csv_header(labels, self.coordinate_names, self.angular) + "\n")
+            write_csv_rows(f, self.time, data)
         return p
 
     def write_tracked_c3d(self, path: str | Path) -> Path:
         """The model's markers as a C3D file (mm) in the trial file's own axes, so it
         overlays the captured markers; a C3D trial's analogs, force platforms and events
         are written with them (:func:`mocapkit.io.c3d.write_c3d`)."""
-        from mocapkit.io.c3d import C3DExtras, write_c3d
-        from mocapkit.markers.trajectories import MarkerTrajectories
-
         rate = self.rate_hz or (1.0 / float(np.median(np.diff(self.time))))
-        traj = MarkerTrajectories(
-            _exact_times(self.time, rate), self.tracked_positions @ _file_axes(self).T,
-            self.marker_names, meta={"rate_hz": rate},
+        return write_tracked_c3d(
+            path, self.time, rate, self.tracked_positions, self.marker_names,
+            str(self.meta.get("file_up_axis") or "z"), self.meta.get("c3d"),
         )  # fmt: skip
-        extras = self.meta.get("c3d")
-        return write_c3d(path, traj, extras if isinstance(extras, C3DExtras) else None)
 
     def write_tracked_trc(self, path: str | Path) -> Path:
         """The model's markers over time as a TRC file (mm) in OpenSim's y-up ground, the
@@ -320,6 +303,40 @@ class ReconstructionResult:
             meta={"rate_hz": rate, "up_axis": "y"},
         )
         return write_trc(path, traj, rate_hz=rate)
+
+
+def output_columns(
+    names: Sequence[str],
+    angular: np.ndarray,
+    coords: FloatArray,
+    keep: np.ndarray,
+    dof_names: Sequence[str] = (),
+    dofs: FloatArray | None = None,
+    keep_dofs: np.ndarray | None = None,
+) -> tuple[list[str], FloatArray]:
+    """The files' labels and rows (angles in degrees): the coordinates ``keep`` (K,) bool,
+    then the model DOFs ``keep_dofs`` of ``dofs`` (N, k) when given."""
+    idx = np.flatnonzero(keep)
+    data = coords[:, idx].copy()
+    ang = angular[idx]
+    data[:, ang] = np.degrees(data[:, ang])
+    labels = [names[int(k)] for k in idx]
+    if dofs is not None and keep_dofs is not None:
+        extra = np.flatnonzero(keep_dofs)
+        labels += [dof_names[int(i)] for i in extra]
+        data = np.column_stack([data, np.degrees(dofs[:, extra])])
+    return labels, data
+
+
+def csv_header(labels: Sequence[str], names: Sequence[str], angular: np.ndarray) -> str:
+    """The CSV's header line: unit suffixes ``_deg`` and ``_m``."""
+    ang = {c for c, a in zip(names, angular, strict=True) if a}
+    return ",".join(["time_s"] + [f"{c}_deg" if c in ang else f"{c}_m" for c in labels])
+
+
+def write_csv_rows(f: Any, time: FloatArray, data: FloatArray) -> None:
+    """CSV rows ``time, data...`` to an open text file."""
+    np.savetxt(f, np.column_stack([time, data]), delimiter=",", fmt="%.8g")
 
 
 def _dofs_behind(
@@ -360,11 +377,26 @@ def _exact_times(time: FloatArray, rate: float) -> FloatArray:
     return regular if np.abs(time - regular).max() <= 0.25 / rate else np.asarray(time)
 
 
-def _file_axes(result: ReconstructionResult) -> FloatArray:
-    """R with x_file = R x_zup for the trial's file axes (``meta["file_up_axis"]``)."""
+def write_tracked_c3d(
+    path: str | Path,
+    time: FloatArray,
+    rate: float,
+    P: FloatArray,
+    names: Sequence[str],
+    file_up_axis: str,
+    extras: Any,
+) -> Path:
+    """The model's markers P (N, M, 3) [m, z-up] as a C3D in the trial file's axes, with a
+    C3D trial's analogs, force platforms and events (``extras``)."""
+    from mocapkit.io.c3d import C3DExtras, write_c3d
     from mocapkit.markers.conventions import rotation_to_z_up
+    from mocapkit.markers.trajectories import MarkerTrajectories
 
-    return rotation_to_z_up(str(result.meta.get("file_up_axis") or "z")).T
+    R = rotation_to_z_up(file_up_axis).T  # x_file = R x_zup
+    traj = MarkerTrajectories(
+        _exact_times(time, rate), P @ R.T, tuple(names), meta={"rate_hz": rate}
+    )
+    return write_c3d(path, traj, extras if isinstance(extras, C3DExtras) else None)
 
 
 def marker_positions(human: HumanModel, names: Sequence[str], Q: FloatArray) -> FloatArray:
@@ -386,66 +418,18 @@ def _no_visible_frames(X: FloatArray, names: Sequence[str], tracked: Sequence[st
     return np.asarray(~np.isfinite(X[:, cols, 0]).any(axis=1))
 
 
-def _coverage_warnings(
-    cnames: Sequence[str],
-    structural: np.ndarray,
-    det: np.ndarray,
-    gimbal: Mapping[str, np.ndarray],
-    report: BoundReport,
-    t: FloatArray,
-    blind: np.ndarray,
-) -> list[str]:
-    """What the outputs leave out or cannot vouch for, in words (see ReconstructionResult)."""
-    out = []
-    never = [c for k, c in enumerate(cnames) if not det[:, k].any()]
-    if never:
-        out.append(
-            f"{len(never)} coordinates are not determined by any tracked marker and are left "
-            f"out of the outputs: {', '.join(never)}"
-        )
-    partial = [c for k, c in enumerate(cnames) if det[:, k].any() and not det[:, k].all()]
-    if partial:
-        out.append(
-            f"coordinates {', '.join(partial[:10])}{' ...' if len(partial) > 10 else ''} are "
-            "undetermined (NaN) in some frames where their markers are missing"
-        )
-    unobserved = structural & report.unobserved
-    if unobserved.any():
-        counts = [(c, int(unobserved[:, k].sum())) for k, c in enumerate(cnames)]
-        worst = sorted((kv for kv in counts if kv[1]), key=lambda kv: -kv[1])[:8]
-        out.append(
-            "numerically undetermined, so NaN there (the visible markers leave a direction "
-            "of them unobserved, e.g. one marker for several DOFs): "
-            + ", ".join(f"{c} in {n} frames" for c, n in worst)
-        )
-    if blind.any():
-        idx = np.flatnonzero(blind)
-        out.append(
-            f"{idx.size} of {len(t)} frames have no visible tracked marker (first at "
-            f"t = {t[idx[0]]:.3f} s, last at t = {t[idx[-1]]:.3f} s): the pose is held there "
-            "and they have no marker error and no error bound (NaN in the per-frame series, "
-            "left out of marker_rms_mm and the other figures)"
-        )
-    for joint, close in gimbal.items():
-        n_close = int((close & det[:, list(cnames).index(joint)]).sum())
-        if n_close:
-            out.append(
-                f"{joint} within 10 deg of +-90 deg in {n_close} frames (gimbal lock of "
-                "OpenSim's rotation order): the other two angles of that joint are "
-                "ill-defined there (the model's own DOFs in q are not)"
-            )
-    n_capped = int(report.capped.any(axis=1).sum())
-    if n_capped:
-        out.append(
-            f"the joint-error bound (eq. 15) exceeded a joint's range in {n_capped} frames "
-            "and is capped at the range there (the linearisation is meaningless that far)"
-        )
-    if report.poorly_determined:
-        worst = sorted(report.poorly_determined.items(), key=lambda kv: -kv[1])[:6]
-        out.append(
-            "poorly determined by the visible markers (more than "
-            f"{POORLY_DETERMINED_DEG_PER_MM:g} deg per mm of marker error): "
-            + ", ".join(f"{d} in {n} frames" for d, n in worst)
-            + "; their joint-error bounds rest on an ill-conditioned fit"
-        )
+def root_angles_before_row(values: FloatArray, k: int) -> FloatArray:
+    """(1, k) a row holding the pelvis rotations ``values`` (3,) in columns 3-5."""
+    row = np.full((1, k), np.nan)
+    row[0, 3:6] = values
+    return row
+
+
+def _last_finite(values: FloatArray) -> FloatArray:
+    """(k,) each column's last finite value of ``values`` (N, k) (NaN when none)."""
+    out = np.full(values.shape[1], np.nan)
+    for j in range(values.shape[1]):
+        fin = np.flatnonzero(np.isfinite(values[:, j]))
+        if fin.size:
+            out[j] = values[fin[-1], j]
     return out

@@ -22,6 +22,21 @@ def _frozen(arr: FloatArray) -> FloatArray:
     return arr
 
 
+def check_whole_rows(
+    pos: FloatArray, names: tuple[str, ...], where: str = "positions", offset: int = 0
+) -> None:
+    """Refuse a marker partly NaN in a frame of ``pos`` (N, M, 3) (frames counted from
+    ``offset``): a missing marker is NaN in all three coordinates."""
+    finite = np.isfinite(pos)
+    partial = finite.any(axis=2) & ~finite.all(axis=2)
+    if partial.any():
+        f, m = np.argwhere(partial)[0]
+        raise DataError(
+            f"{where}: marker {names[m]!r} is partly NaN at frame {offset + int(f)}; mark a "
+            "missing marker with all three coordinates NaN"
+        )
+
+
 @dataclass(frozen=True)
 class MarkerTrajectories:
     """Marker positions over time.
@@ -61,15 +76,8 @@ class MarkerTrajectories:
             if n in seen:
                 raise DataError(f"names: marker {n!r} appears twice; labels must be unique")
             seen.add(n)
-        finite = np.isfinite(pos)
-        partial = finite.any(axis=2) & ~finite.all(axis=2)
-        if partial.any():
-            f, m = np.argwhere(partial)[0]
-            raise DataError(
-                f"positions: marker {names[m]!r} is partly NaN at frame {f}; mark a missing "
-                "marker with all three coordinates NaN"
-            )
-        pos[~finite.all(axis=2)] = np.nan
+        check_whole_rows(pos, names)
+        pos[~np.isfinite(pos).all(axis=2)] = np.nan
         object.__setattr__(self, "time", _frozen(time))
         object.__setattr__(self, "positions", _frozen(pos))
         object.__setattr__(self, "names", names)

@@ -23,6 +23,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from mocapkit._spill import RowFile
 from mocapkit._validate import FloatArray
 from mocapkit.errors import DataError
 from mocapkit.geometry import quat_from_two_vectors, quat_mul
@@ -88,33 +89,22 @@ class DiskStore(Store):
 
     def __init__(self, directory: str | Path) -> None:
         self.directory = Path(directory)
-        self.files: dict[str, Any] = {}
+        self.files: dict[str, RowFile] = {}
 
-    def _file(self, name: str) -> Any:
+    def _file(self, name: str) -> RowFile:
         if name not in self.files:
-            self.files[name] = open(self.directory / f"{name}.f64", "w+b")  # noqa: SIM115
+            self.files[name] = RowFile(self.directory / f"{name}.f64", (COLUMNS[name],))
         return self.files[name]
 
     def read(self, name: str, a: int, b: int) -> FloatArray:
-        cols = COLUMNS[name]
-        f = self._file(name)
-        f.seek(a * cols * 8)
-        out = np.fromfile(f, dtype=np.float64, count=(b - a) * cols)
-        if out.size != (b - a) * cols:
-            raise OSError(f"{self.directory / name}.f64: rows {a}..{b} not written")
-        return out.reshape(b - a, cols)
+        return self._file(name).read(a, b)
 
     def write(self, name: str, a: int, rows: FloatArray) -> None:
-        cols = COLUMNS[name]
-        f = self._file(name)
-        f.seek(a * cols * 8)
-        f.write(np.ascontiguousarray(rows, dtype=np.float64).tobytes())
+        self._file(name).write(a, np.asarray(rows).reshape(len(rows), COLUMNS[name]))
 
     def close(self) -> None:
         for f in self.files.values():
             f.close()
-        for name in list(self.files):
-            (self.directory / f"{name}.f64").unlink(missing_ok=True)
         self.files.clear()
 
 
