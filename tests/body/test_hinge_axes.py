@@ -4,6 +4,7 @@ calibrates the segment on either side, exact on synthetic joints."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from mocapkit.body.calibration import angular_rate
 from mocapkit.body.functional import hinge_axes
@@ -69,7 +70,9 @@ def test_a_second_axis_moving_with_the_first_is_taken_out() -> None:
     assert _angle_deg(plain.in_parent, j1) > 5.0
     assert _angle_deg(fitted.in_parent, j1) < 0.5
     assert np.sign(fitted.in_parent @ plain.in_parent) > 0  # same sign as the plain one
-    assert fitted.share_parent == plain.share_parent  # the dominant axis' share, as reported
+    # the share is what the two axes explain, not the dominant axis' alone
+    assert plain.share_parent < 0.99
+    assert fitted.share_parent > 0.9999
     # the swapped model (a turn about the upper arm's long axis, a flexion fixed in the
     # forearm) is not taken: with the long axis given as the flexion axis, no fit is left
     sp, sc = OrientationSeries(t, q_p), OrientationSeries(t, q_c)
@@ -84,3 +87,34 @@ def test_too_little_motion_gives_no_axis() -> None:
     h = _hinge(t, q, q.copy())
     assert not np.isfinite(h.in_parent).all()
     assert h.share_parent == 0.0
+
+
+def _elbow_in_a_walk(flex_amp: float, twist_amp: float, phase: float) -> tuple[np.ndarray, ...]:
+    """An elbow as in a walk: from the held pose (straight, forearm neutral) flexing to
+    ~50 deg while the forearm pronates (both on one profile: nearly one motion), then
+    small oscillations of both. Axes as in the full-body tree (Rajagopal's elbow)."""
+    s = 0.5 - 0.5 * np.cos(np.linspace(0.0, np.pi, 100))
+    tw = np.arange(250) / RATE
+    flex = np.concatenate([0.9 * s, 0.9 + flex_amp * np.sin(2 * np.pi * 0.9 * tw)])
+    twist = np.concatenate([-0.5 * s, -0.5 + twist_amp * np.sin(2 * np.pi * 0.9 * tw + phase)])
+    t = np.arange(flex.size) / RATE
+    q_p = quat_from_axis_angle(_unit([0.3, 1.0, 0.2]), 0.4 * np.sin(2 * np.pi * 0.9 * t))
+    j1, j2 = _unit([0.226, 0.022, 0.974]), _unit([0.048, 0.998, -0.034])
+    rel = quat_mul(quat_from_axis_angle(j1, flex), quat_from_axis_angle(j2, twist))
+    mount_c = quat_from_axis_angle(_unit([1.0, 2.0, -0.5]), 1.1)
+    return t, q_p, quat_mul(quat_mul(q_p, rel), mount_c), j1
+
+
+@pytest.mark.parametrize(
+    ("flex_amp", "twist_amp", "phase"),
+    [(0.09, 0.03, 2.2), (0.09, 0.03, 1.0), (0.09, 0.05, 0.0), (0.15, 0.03, 3.0)],
+)
+def test_an_elbow_that_hardly_moves_still_gives_its_axis(
+    flex_amp: float, twist_amp: float, phase: float
+) -> None:
+    """The alternation alone stalled 9-28 deg off the axis on these exact rates (a narrow
+    valley); the joint least-squares step reaches it."""
+    t, q_p, q_c, j1 = _elbow_in_a_walk(flex_amp, twist_amp, phase)
+    h = _hinge(t, q_p, q_c, second_axis=True)
+    assert _angle_deg(h.in_parent, j1) < 1.0
+    assert h.share_parent > 0.9999

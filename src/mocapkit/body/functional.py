@@ -87,6 +87,14 @@ MAX_MOTION_S = 300.0
 MAX_FIT_SAMPLES = 20_000
 # Alternations of the two-axis fit (each a pair of 3x3 eigenproblems; settled by ~10).
 SECOND_AXIS_ITERATIONS = 30
+# Starts of the two-axis fit across the parent's long axis, besides the relative rate's
+# principal axes (every 22.5 deg: the first axis is anatomically near 90 deg from it).
+PERPENDICULAR_STARTS = 8
+# Samples of the joint least-squares step of the two-axis fit (evenly spread).
+LEAST_SQUARES_SAMPLES = 5_000
+# Starts whose alternation ends within this cosine of one already refined are not refined
+# again (the same valley; 0.5 deg).
+SAME_START_COS = float(np.cos(np.radians(0.5)))
 # Moving-average length [s] for the angular rate before the principal axis (twice: a
 # triangular window of 2 x 0.1 s, first zero near 10 Hz; gait is below 5 Hz).
 SMOOTH_S = 0.1
@@ -165,8 +173,8 @@ def hinge_axes(
     fit = _first_of_two_axes(w, r_rel, smooth, second_axis)
     if fit is None:
         return hinge
-    j1 = fit if float(fit @ axis_p) >= 0.0 else -fit
-    return replace(hinge, in_parent=j1)
+    j1 = fit[0] if float(fit[0] @ axis_p) >= 0.0 else -fit[0]
+    return replace(hinge, in_parent=j1, share_parent=fit[1])
 
 
 def _central(rate_world: FloatArray) -> FloatArray:
@@ -180,7 +188,7 @@ def _central(rate_world: FloatArray) -> FloatArray:
 
 def _first_of_two_axes(
     w: FloatArray, r_rel: FloatArray, smooth: int, long_axis: FloatArray
-) -> FloatArray | None:
+) -> tuple[FloatArray, float] | None:
     """The first axis of a joint with a second axis fixed in the child (the forearm's
     pronation after the elbow's flexion, the subtalar joint after the ankle).
 
@@ -188,8 +196,12 @@ def _first_of_two_axes(
     parent, ``j2`` in the child), so ``j1 . (R_rel j2 x w) = 0`` and ``j2 . (w_c x R_rel^T
     j1) = 0``; solved alternately, each a small generalised eigenproblem, from each of the
     relative rate's three principal axes (the second axis may move more than the first:
-    a forearm turning from the held pose into the walk), keeping the one the two axes
-    explain best. The
+    a forearm turning from the held pose into the walk) and from
+    :data:`PERPENDICULAR_STARTS` directions across the parent's long axis (where the first
+    axis lies: on a walk whose elbows hardly move the alternation stops in local minima,
+    10 deg off the elbow's axis from the principal axes alone), keeping the one the two
+    axes explain best; returns it and the share of the relative rotation energy the two
+    axes explain (the joint's ``share_parent``). The
     dominant axis alone is pulled towards the second axis by as much as the two move
     together. With the elbow straight, a turn about the upper arm's long axis and a
     flexion fixed in the forearm fit as well as the anatomy: solutions whose first axis
@@ -212,7 +224,8 @@ def _first_of_two_axes(
     w_c = np.einsum("nji,nj->ni", r_rel, w)
     energy = float(np.sum(w * w))
     best: tuple[FloatArray, float] | None = None
-    for start in np.linalg.eigh(w.T @ w)[1].T:
+    refined: list[FloatArray] = []
+    for start in (*np.linalg.eigh(w.T @ w)[1].T, *_across(long_axis, PERPENDICULAR_STARTS)):
         j1 = start
         u = np.einsum("nji,j->ni", r_rel, j1)
         j2 = dominant_axis(w_c - np.sum(w_c * u, axis=1, keepdims=True) * u, min_rate=0.0)[0]
@@ -224,6 +237,10 @@ def _first_of_two_axes(
             j2 = _plane_normal_fit(np.einsum("nji,j->ni", r_rel, j1), w_c, smooth)
             if abs(float(before @ j1)) > 1.0 - 1e-12:  # settled
                 break
+        if any(abs(float(j1 @ seen)) > SAME_START_COS for seen in refined):
+            continue  # this valley is already searched
+        refined.append(j1)
+        j1, j2 = _two_axes_least_squares(j1, j2, w, r_rel)
         v = np.einsum("nij,j->ni", r_rel, j2)
         normal = np.cross(j1, v)
         size = np.linalg.norm(normal, axis=1)
@@ -235,7 +252,46 @@ def _first_of_two_axes(
         explained = 1.0 - float(np.sum(off * off)) / max(energy, 1e-300)
         if best is None or explained > best[1]:
             best = (j1, explained)
-    return None if best is None else best[0]
+    return best
+
+
+def _two_axes_least_squares(
+    j1: FloatArray, j2: FloatArray, w: FloatArray, r_rel: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Both axes at once (Levenberg-Marquardt on the distances of the relative rates from
+    the plane of ``j1`` and ``R_rel j2``), from the alternation's result: the alternation
+    moves one axis at a time and stalls in the narrow valleys that little motion makes
+    (an elbow in a walk: 10 deg off on exact rates; 0.1-0.8 deg after this step)."""
+    from scipy.optimize import least_squares
+
+    if len(w) > LEAST_SQUARES_SAMPLES:  # evenly spread: each step is a pass over them
+        pick = np.linspace(0, len(w) - 1, LEAST_SQUARES_SAMPLES).astype(int)
+        w, r_rel = w[pick], r_rel[pick]
+    frames = [_across(j1, 2), _across(j2, 2)]
+
+    def axes(p: FloatArray) -> tuple[FloatArray, FloatArray]:
+        a = j1 + p[0] * frames[0][0] + p[1] * frames[0][1]
+        b = j2 + p[2] * frames[1][0] + p[3] * frames[1][1]
+        return a / np.linalg.norm(a), b / np.linalg.norm(b)
+
+    def residuals(p: FloatArray) -> FloatArray:
+        a, b = axes(p)
+        normal = np.cross(a, np.einsum("nij,j->ni", r_rel, b))
+        size = np.maximum(np.linalg.norm(normal, axis=1), 1e-9)
+        return np.asarray(np.einsum("ni,ni->n", normal, w) / size)
+
+    sol = least_squares(residuals, np.zeros(4), method="lm", xtol=1e-12, ftol=1e-12)
+    return axes(sol.x)
+
+
+def _across(axis: FloatArray, n: int) -> list[FloatArray]:
+    """``n`` unit directions perpendicular to ``axis``, evenly over half a turn."""
+    a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    e = np.eye(3)[int(np.argmin(np.abs(a)))]
+    u = np.cross(a, e)
+    u /= np.linalg.norm(u)
+    v = np.cross(a, u)
+    return [np.cos(t) * u + np.sin(t) * v for t in np.arange(n) * np.pi / n]
 
 
 def _plane_normal_fit(v: FloatArray, w: FloatArray, smooth: int = 1) -> FloatArray:
