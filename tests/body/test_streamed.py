@@ -154,3 +154,82 @@ def test_cli_streams_an_orientation_table(tmp_path: Path, capsys: pytest.Capture
         read_joint_angles_mot(tmp_path / "b.mot").values,
         atol=1e-9,
     )
+
+
+def _ximu3_export(tmp_path: Path) -> tuple[SensorTree, Path]:
+    """A lower-body suit's raw samples (simulated, consumer grade, still for 2.5 s then
+    gait-like) written as an x-IMU3 export, each sensor on a clock of its own."""
+    from mocapkit.body.simulate import segment_poses, virtual_suit
+    from mocapkit.io.ximu3 import INERTIAL_COLUMNS, MAG_COLUMNS, STANDARD_GRAVITY
+
+    tree = SensorTree.preset("lower_body")
+    t = np.arange(1500) / 100.0
+    coords = gait_like(tree, t, 2.5, pose_coordinates(tree, "npose"), amplitude=0.3, seed=2)
+    segs = segment_poses(tree, t, coords, heading_rad=0.4, speed=0.0)
+    recs, _ = virtual_suit(tree, segs, np.random.default_rng(2), max_mount_deg=30.0)
+    root = tmp_path / "export"
+    for k, s in enumerate(tree.segments):
+        rec = recs[s.sensor]
+        d = root / f"{s.sensor} 64F0EB{k:02d} (UDP)"
+        d.mkdir(parents=True)
+        (d / "Command.json").write_text(json.dumps([{"ping": {"name": s.sensor}}]))
+        us = np.round((rec.time + 100.0 + 0.0031 * k) * 1e6)  # its own clock
+        np.savetxt(d / "Inertial.csv",
+                   np.column_stack([us, np.degrees(rec.gyr), rec.acc / STANDARD_GRAVITY]),
+                   delimiter=",", fmt=["%d"] + ["%.7f"] * 6,
+                   header=",".join(INERTIAL_COLUMNS), comments="")  # fmt: skip
+        np.savetxt(d / "Magnetometer.csv", np.column_stack([us, rec.mag]), delimiter=",",
+                   fmt=["%d"] + ["%.5f"] * 3, header=",".join(MAG_COLUMNS),
+                   comments="")  # fmt: skip
+    return tree, root
+
+
+@pytest.mark.usefixtures("short_windows")
+def test_raw_samples_streamed_equal_the_whole_recording(tmp_path: Path) -> None:
+    """An x-IMU3 export through polaris-body 9D: filtered, aligned onto one time base and
+    turned into angles piece by piece, against the whole path (run_filter, run_body)."""
+    from mocapkit.body.recordings import read_raw, run_filter
+    from mocapkit.imu.sensor_spill import body_pieces
+    from mocapkit.imu.streaming import spill_ximu3
+
+    tree, root = _ximu3_export(tmp_path)
+    whole = run_body(tree, run_filter(read_raw(root, "device"), "polaris-body", "9d"))
+    write_joint_angles_mot(tmp_path / "whole.mot", whole.body.angles)
+    spills = spill_ximu3(root, "polaris-body", "9d", tmp_path, chunk_rows=211,
+                         sensors=[s.sensor for s in tree.segments])  # fmt: skip
+    try:
+        done = streamed.stream_body(tree, root, output=tmp_path / "piece.mot",
+                                    pieces=body_pieces(spills, rows=97))  # fmt: skip
+    finally:
+        for s in spills:
+            s.close()
+    _assert_close(done.calibration.to_dict(), whole.calibration.to_dict())
+    a = read_joint_angles_mot(tmp_path / "piece.mot")
+    b = read_joint_angles_mot(tmp_path / "whole.mot")
+    assert a.names == b.names
+    assert a.n_samples == b.n_samples > 1400
+    np.testing.assert_array_equal(a.time, b.time)
+    np.testing.assert_allclose(a.values, b.values, atol=1e-8)
+
+
+def test_cli_streams_raw_samples_of_an_export(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from mocapkit.cli.main import main
+
+    _, root = _ximu3_export(tmp_path)
+    base = ["body", "angles", str(root), "--preset", "lower_body", "--filter", "polaris-body",
+            "--json"]  # fmt: skip
+    assert main([*base, "-o", str(tmp_path / "st.mot")]) == 0
+    streamed_run = json.loads(capsys.readouterr().out)
+    assert streamed_run["streamed"] is True
+    # --start makes it read the whole recording (the whole path crops before aligning)
+    assert main([*base, "--start", "0", "-o", str(tmp_path / "wh.mot")]) == 0
+    assert json.loads(capsys.readouterr().out)["streamed"] is False
+    a = read_joint_angles_mot(tmp_path / "st.mot")
+    b = read_joint_angles_mot(tmp_path / "wh.mot")
+    np.testing.assert_allclose(a.values, b.values, atol=1e-8)
+    # a tree sensor the export lacks: the whole path's message, nothing written
+    assert main([*base, "--map", "pelvis=Hips", "-o", str(tmp_path / "x.mot")]) != 0
+    assert "no data for sensor(s) pelvis <- 'Hips'" in capsys.readouterr().err
+    assert not (tmp_path / "x.mot").exists()

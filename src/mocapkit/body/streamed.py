@@ -41,7 +41,7 @@ from mocapkit.body.pipeline import (
 )
 from mocapkit.body.plausibility import Finding, RangeTally, warn_findings
 from mocapkit.body.sensor_tree import SensorTree
-from mocapkit.errors import DataError
+from mocapkit.errors import ConfigError, DataError
 from mocapkit.series import OrientationSeries
 
 #: without a calibration window, the still pose is looked for in this many seconds
@@ -237,6 +237,7 @@ def stream_body(
     max_hold_s: float = 0.5,
     still_duration_s: float = 1.0,
     rows: int = 10_000,
+    pieces: Iterator[tuple[FloatArray, FloatArray]] | None = None,
     **calibrate_kwargs: Any,
 ) -> StreamedBody:
     """:func:`mocapkit.body.pipeline.run_body` on an OpenSense quaternion ``.sto``, read
@@ -246,11 +247,19 @@ def stream_body(
         output: joint angles ``.mot`` (degrees, as ``write_joint_angles_mot``), or None.
         segments_output: segment orientations as a quaternion ``.sto``, or None.
         calibration, placement, window, start, stop, dropout, max_hold_s: as ``run_body``.
+        pieces: the orientations already on one time base, ``(t (n,), q (n, S, 4))`` in
+            the tree's sensor order, instead of reading ``path`` (which then only names
+            the recording in messages): raw samples filtered and aligned piece by piece
+            (:func:`mocapkit.imu.sensor_spill.body_pieces`); no ``start``/``stop`` then
+            (the whole path crops each sensor before aligning them).
     """
     from mocapkit.io.joint_angles_mot import JointAnglesMotWriter
     from mocapkit.io.opensim_table import QuaternionTableWriter
 
-    pieces = _pieces(Path(path), tree, rows, start, stop)
+    if pieces is not None and (start is not None or stop is not None):
+        raise ConfigError("stream_body: start/stop apply to a file read here, not to pieces")
+    if pieces is None:
+        pieces = _pieces(Path(path), tree, rows, start, stop)
     head: list[tuple[FloatArray, FloatArray]] = []
     checks: list[CalibrationFinding] = []
     if isinstance(calibration, BodyCalibration):

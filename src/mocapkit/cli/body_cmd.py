@@ -62,6 +62,40 @@ def _cmd_presets(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _is_ximu3(path: Path) -> bool:
+    from mocapkit.io.ximu3 import is_ximu3_sensor, ximu3_sensor_dirs
+
+    return path.is_dir() and (is_ximu3_sensor(path) or bool(ximu3_sensor_dirs(path)))
+
+
+def _stream_raw(tree: Any, args: argparse.Namespace, options: dict[str, Any]) -> Any:
+    """An x-IMU3 export's raw samples through ``--filter`` into the body model, piece by
+    piece: each sensor filtered into a file on disk, then all aligned onto one time base
+    (:mod:`mocapkit.imu.sensor_spill`) and streamed through :func:`stream_body`."""
+    import tempfile
+
+    from mocapkit.body.streamed import stream_body
+    from mocapkit.imu.sensor_spill import body_pieces
+    from mocapkit.imu.streaming import spill_ximu3
+    from mocapkit.io.ximu3 import is_ximu3_sensor, sensor_name, ximu3_sensor_dirs
+
+    path = Path(args.recording)
+    tree.check_sensors(  # the whole path's message for a sensor the export lacks
+        [sensor_name(d) for d in ([path] if is_ximu3_sensor(path) else ximu3_sensor_dirs(path))]
+    )
+    options = {k: v for k, v in options.items() if k not in ("start", "stop")}
+    with tempfile.TemporaryDirectory(prefix="mocapkit-body-") as tmp:
+        spills = spill_ximu3(Path(args.recording), args.filter, args.mode, tmp,
+                             sensors=[s.sensor for s in tree.segments])  # fmt: skip
+        try:
+            return stream_body(tree, args.recording, output=args.output,
+                               segments_output=args.segments, pieces=body_pieces(spills),
+                               **options)  # fmt: skip
+        finally:
+            for s in spills:
+                s.close()
+
+
 def _cmd_angles(args: argparse.Namespace) -> int:
     from mocapkit.body.calibration import BodyCalibration, HeadingFixed, HeadingFromSensor
     from mocapkit.body.pipeline import default_heading_alignment, run_body, summary
@@ -83,9 +117,16 @@ def _cmd_angles(args: argparse.Namespace) -> int:
         not args.filter and fmt == "opensense-sto" and not args.bvh
         and (alignment != "joints" or bool(args.calibration_in))
     )  # fmt: skip
+    # raw samples of an x-IMU3 export (sensors on their own clocks) through a filter, when
+    # nothing needs the whole recording: filtered, aligned and turned into angles in pieces
+    raw_streamed = (
+        bool(args.filter) and _is_ximu3(Path(args.recording)) and not args.bvh
+        and alignment != "joints" and args.start is None and args.stop is None
+    )  # fmt: skip
+    streamed = streamed or raw_streamed
     raw = None
     orientations: Any = None
-    if args.filter:  # raw samples through our filter; the accelerometers serve the joints
+    if args.filter and not raw_streamed:  # raw samples through our filter (the joints' acc)
         raw = read_raw(Path(args.recording), fmt)
         orientations = run_filter(raw, args.filter, args.mode)
     elif not streamed:
@@ -124,11 +165,14 @@ def _cmd_angles(args: argparse.Namespace) -> int:
     }
     t0 = time.perf_counter()
     outputs = {}
-    if streamed:
+    if raw_streamed:
+        done = _stream_raw(tree, args, options)
+    elif streamed:
         from mocapkit.body.streamed import stream_body
 
         done = stream_body(tree, args.recording, output=args.output,
                            segments_output=args.segments, **options)  # fmt: skip
+    if streamed:
         report, cal = done.summary, done.calibration
         outputs.update({"mot": args.output} if args.output else {})
         outputs.update({"segments": args.segments} if args.segments else {})

@@ -318,35 +318,50 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _streams(args: argparse.Namespace) -> bool:
-    """One mocapkit IMU CSV: read, filtered and written piece by piece (online), or read
-    and smoothed piece by piece through files on disk (offline)."""
+    """Read, filtered and written piece by piece: one mocapkit IMU CSV (online, or
+    smoothed offline through files on disk), or an x-IMU3 export (online: every sensor on
+    its own clock through files on disk, then resampled onto one time base)."""
+    from mocapkit.io.ximu3 import is_ximu3_sensor, ximu3_sensor_dirs
+
     path = Path(args.path)
+    if args.filter_name == DEVICE or args.remove_gyr_bias:
+        return False
+    if path.is_file():
+        return path.suffix.lower() == ".csv" and not args.sensor
     return (
-        path.is_file()
-        and path.suffix.lower() == ".csv"
-        and args.filter_name != DEVICE
-        and not args.remove_gyr_bias
-        and not args.sensor
+        path.is_dir()
+        and not args.offline
+        and (is_ximu3_sensor(path) or bool(ximu3_sensor_dirs(path)))
     )
 
 
 def _run_streamed(args: argparse.Namespace) -> int:
-    from mocapkit.imu.streaming import run_csv_offline, run_csv_streaming
+    from mocapkit.imu.streaming import run_csv_offline, run_csv_streaming, run_ximu3_streaming
 
-    run = run_csv_offline if args.offline else run_csv_streaming
-    rep = run(Path(args.path), args.filter_name, args.output, mode=args.mode,
-              params=dict(args.param))  # fmt: skip
-    if rep.mag_gaps or rep.acc_rejected or rep.mag_rejected:
-        print(
-            f"{rep.sensor}: {rep.mag_gaps} magnetometer gaps and {rep.mag_rejected} rejected "
-            f"samples processed as 6D, {rep.acc_rejected} accelerometer samples rejected",
-            file=sys.stderr,
-        )
-    label = "_".join(rep.sensor.split())
-    print(f"wrote {args.output} ({rep.rows} rows, sensors: {label})", file=sys.stderr)
+    path = Path(args.path)
+    if path.is_dir():
+        rep = run_ximu3_streaming(path, args.filter_name, args.output, mode=args.mode,
+                                  params=dict(args.param), sensors=args.sensor or None)  # fmt: skip
+        for note in rep.notes:
+            print(note, file=sys.stderr)
+        labels = ["_".join(n.split()) for n in rep.sensors]
+    else:
+        run = run_csv_offline if args.offline else run_csv_streaming
+        rep = run(path, args.filter_name, args.output, mode=args.mode,
+                  params=dict(args.param))  # fmt: skip
+        if rep.mag_gaps or rep.acc_rejected or rep.mag_rejected:
+            print(
+                f"{rep.sensor}: {rep.mag_gaps} magnetometer gaps and {rep.mag_rejected} "
+                f"rejected samples processed as 6D, {rep.acc_rejected} accelerometer samples "
+                "rejected",
+                file=sys.stderr,
+            )
+        labels = ["_".join(rep.sensor.split())]
+    print(f"wrote {args.output} ({rep.rows} rows, sensors: {', '.join(labels)})",
+          file=sys.stderr)  # fmt: skip
     if args.json:
         print_json(
-            {"output": str(args.output), "rows": rep.rows, "sensors": [label],
+            {"output": str(args.output), "rows": rep.rows, "sensors": labels,
              "filter": args.filter_name, "mode": args.mode, "offline": args.offline,
              "streamed": True, "chunks": rep.chunks}
         )  # fmt: skip

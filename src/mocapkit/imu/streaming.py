@@ -17,15 +17,19 @@ the same numbers as in memory), and each smoothed piece is appended to the table
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from mocapkit._validate import FloatArray
 from mocapkit.errors import ConfigError, DataError
 from mocapkit.io.imu_csv import CHUNK_ROWS, iter_imu_csv
 from mocapkit.io.opensim_table import QuaternionTableWriter
+
+SENSOR_CHUNK_ROWS = 20_000  # rows of one sensor of several in memory at a time
 
 
 @dataclass
@@ -33,6 +37,7 @@ class StreamReport:
     """What a streamed run did."""
 
     sensor: str = ""
+    sensors: list[str] = field(default_factory=list)  # several sensors: their names
     rows: int = 0
     chunks: int = 0
     mag_gaps: int = 0
@@ -53,37 +58,22 @@ def run_csv_streaming(
 ) -> StreamReport:
     """A mocapkit IMU CSV through an online filter into an orientation table, piece by
     piece (module docstring). Time in the table starts at 0 (the first sample)."""
-    from mocapkit.imu.filters import make_filter
-    from mocapkit.io.imu_files import check_units
+    from mocapkit.imu.sensor_spill import filter_pieces
 
     report = StreamReport()
     writer: QuaternionTableWriter | None = None
-    filt = None
     t0 = t_last = 0.0
+    pieces = iter_imu_csv(path, chunk_rows=chunk_rows)
     try:
-        for piece in iter_imu_csv(path, chunk_rows=chunk_rows):
-            if filt is None:
-                check_units(piece)  # a gyroscope in deg/s shows in the first piece
-                if piece.n_samples < 2:
-                    raise ConfigError(
-                        f"{path}: {piece.n_samples} data row: at least 2 are needed to know "
-                        "the sampling rate"
-                    )
-                filt = make_filter(filter_name, piece.rate_hz, **(params or {}))
+        for piece, q, r in filter_pieces(pieces, filter_name, mode, params, source=path):
+            if writer is None:
                 t0 = float(piece.time[0])
-                steps = np.concatenate([[filt.params.dt], np.diff(piece.time)])
                 report.sensor = piece.name
                 label = "_".join(piece.name.split())
                 writer = QuaternionTableWriter(output, [label], piece.rate_hz, path.stem)
-            else:
-                steps = np.concatenate([[piece.time[0] - t_last], np.diff(piece.time)])
-            mag = piece.mag if mode == "9d" else None
-            q = filt.run(piece.gyr, piece.acc, mag, dt=steps)
-            r = filt.last_report
             report.mag_gaps += r.mag_gaps
             report.mag_rejected += r.mag_rejected
             report.acc_rejected += r.acc_rejected
-            assert writer is not None
             writer.write(piece.time - t0, q[:, None, :])
             t_last = float(piece.time[-1])
             report.rows += piece.n_samples
@@ -202,3 +192,130 @@ def _spill_csv(
 
 
 __all__ = ["StreamReport", "run_csv_offline", "run_csv_streaming"]
+
+
+def spill_ximu3(
+    path: Path,
+    filter_name: str,
+    mode: str,
+    directory: str | Path,
+    *,
+    params: dict[str, Any] | None = None,
+    sensors: list[str] | None = None,
+    chunk_rows: int = SENSOR_CHUNK_ROWS,
+    report: StreamReport | None = None,
+) -> list[Any]:
+    """Every sensor of an x-IMU3 export (or ``sensors``, in that order) through its own
+    online filter piece by piece into :class:`~mocapkit.imu.sensor_spill.SensorSpill` files
+    in ``directory``; ``report`` tallies what the filters rejected, per sensor in
+    ``notes``."""
+    from mocapkit.imu.sensor_spill import SensorSpill, filter_pieces
+    from mocapkit.io.ximu3 import (
+        is_ximu3_sensor,
+        iter_ximu3_sensor,
+        sensor_name,
+        ximu3_sensor_dirs,
+    )
+
+    dirs: dict[str, Path] = {}
+    for d in [path] if is_ximu3_sensor(path) else ximu3_sensor_dirs(path):
+        name = sensor_name(d)
+        if name in dirs:
+            raise DataError(f"{path}: two sensors are named {name!r} ({d.name})")
+        dirs[name] = d
+    if sensors:
+        unknown = [s for s in sensors if s not in dirs]
+        if unknown:
+            raise ConfigError(
+                f"--sensor {', '.join(unknown)}: not in {path}; sensors: {', '.join(dirs)}"
+            )
+        dirs = {s: dirs[s] for s in sensors}
+    rep = report if report is not None else StreamReport()
+    rep.sensor, rep.sensors = ", ".join(dirs), list(dirs)
+    spills = [SensorSpill(directory, name, i) for i, name in enumerate(dirs)]
+    try:
+        for spill, d in zip(spills, dirs.values(), strict=True):
+            counts = [0, 0, 0]
+            pieces = iter_ximu3_sensor(d, spill.name, rows=chunk_rows)
+            for piece, q, r in filter_pieces(pieces, filter_name, mode, params):
+                spill.append(piece.time, q)
+                counts = [
+                    c + x
+                    for c, x in zip(
+                        counts, (r.mag_gaps, r.mag_rejected, r.acc_rejected), strict=True
+                    )
+                ]
+                rep.chunks += 1
+            rep.mag_gaps += counts[0]
+            rep.mag_rejected += counts[1]
+            rep.acc_rejected += counts[2]
+            if any(counts):
+                rep.notes.append(
+                    f"{spill.name}: {counts[0]} magnetometer gaps and {counts[1]} rejected "
+                    f"samples processed as 6D, {counts[2]} accelerometer samples rejected"
+                )
+    except BaseException:
+        for s in spills:
+            s.close()
+        raise
+    return spills
+
+
+def run_ximu3_streaming(
+    path: Path,
+    filter_name: str,
+    output: Path,
+    *,
+    mode: str = "9d",
+    params: dict[str, Any] | None = None,
+    sensors: list[str] | None = None,
+    chunk_rows: int = SENSOR_CHUNK_ROWS,
+    workdir: str | Path | None = None,
+) -> StreamReport:
+    """An x-IMU3 export directory (one sub-directory per sensor, each on its own clock)
+    through an online filter into one orientation table, in bounded memory
+    (:mod:`mocapkit.imu.sensor_spill`): every sensor filtered piece by piece into a file
+    on disk (:func:`spill_ximu3`), then all resampled onto one time base (slerp) and
+    written a piece at a time. ``sensors``: only these (by name). The numbers of the
+    whole-recording path."""
+    import sys
+    import tempfile
+
+    from mocapkit.imu.resample import resample_orientation
+    from mocapkit.imu.sensor_spill import aligned_pieces, imu_time_base
+
+    report = StreamReport()
+    with tempfile.TemporaryDirectory(prefix="mocapkit-sensors-", dir=workdir) as tmp:
+        spills = spill_ximu3(path, filter_name, mode, tmp, params=params, sensors=sensors,
+                             chunk_rows=chunk_rows, report=report)  # fmt: skip
+        try:
+            labels = ["_".join(s.name.split()) for s in spills]
+            grid: Callable[[int, int], FloatArray]
+            if len(spills) == 1:  # its own clock
+                grid, n = spills[0].time.read, spills[0].n
+                rows = _own_clock(spills[0], chunk_rows)
+            else:
+                grid, n = imu_time_base(spills)
+                rows = aligned_pieces(spills, grid, n, resample_orientation, chunk_rows)
+                print(f"resampled {len(spills)} sensors onto one time base ({n} samples, "
+                      f"{grid(0, 1)[0]:.3f}..{grid(n - 1, n)[0]:.3f} s) by slerp",
+                      file=sys.stderr)  # fmt: skip
+            whole = grid(0, n)
+            t0 = float(whole[0])
+            rate = 1.0 / float(np.median(np.diff(whole))) if n > 1 else 0.0
+            del whole
+            with QuaternionTableWriter(output, labels, rate, path.stem) as writer:
+                for t, q in rows:
+                    writer.write(t - t0, q)
+                    report.rows += len(t)
+        finally:
+            for s in spills:
+                s.close()
+    return report
+
+
+def _own_clock(spill: Any, rows: int) -> Any:
+    """One sensor's spilled series as it is: ``(t, q (n, 1, 4))`` pieces."""
+    for a in range(0, spill.n, rows):
+        b = min(spill.n, a + rows)
+        yield spill.time.read(a, b), spill.quat.read(a, b)[:, None, :]

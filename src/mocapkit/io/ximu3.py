@@ -21,6 +21,7 @@ What was done is recorded in ``recording.meta["mag_alignment"]``.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +29,7 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.errors import FileFormatError
 from mocapkit.geometry import quat_from_axis_angle, quat_mul
-from mocapkit.io._text_table import parse_rows, read_text
+from mocapkit.io._text_table import iter_csv_blocks
 from mocapkit.series import ImuRecording, OrientationSeries
 
 STANDARD_GRAVITY = 9.80665  # [m/s^2 per g]
@@ -47,26 +48,30 @@ QUAT_COLUMNS = ["Timestamp (us)", "W", "X", "Y", "Z"]
 Q_ENU_NWU = quat_from_axis_angle([0.0, 0.0, 1.0], np.pi / 2)
 
 
+def _blocks(path: Path, columns: list[str], rows: int = 50_000) -> Iterator[FloatArray]:
+    """An x-IMU3 CSV's rows, ``rows`` at a time, time stamps checked increasing across
+    blocks (the error names the row and line)."""
+    last: float | None = None
+    row0 = 0
+    blocks = iter_csv_blocks(path, columns, rows, what="x-IMU3 export",
+                             hint="; is this an x-IMU3 GUI CSV export?")  # fmt: skip
+    for line, data in blocks:
+        t = data[:, 0] if last is None else np.concatenate([[last], data[:, 0]])
+        bad = np.flatnonzero(np.diff(t) <= 0)
+        if bad.size:
+            k = int(bad[0]) + (1 if last is None else 0)  # index in this block
+            raise FileFormatError(
+                f"{path}: time stamps not increasing at data row {row0 + k} (line "
+                f"{line + k}: {t[int(bad[0])]:.0f} us then {data[k, 0]:.0f} us); sort the "
+                "rows and drop duplicates"
+            )
+        last = float(data[-1, 0])
+        row0 += len(data)
+        yield data
+
+
 def _read_table(path: Path, columns: list[str]) -> FloatArray:
-    lines = read_text(path)
-    if not lines:
-        raise FileFormatError(f"{path}: empty file")
-    header = [c.strip() for c in lines[0].split(",")]
-    if header != columns:
-        raise FileFormatError(
-            f"{path}: header {header} does not match the x-IMU3 export {columns}; "
-            "is this an x-IMU3 GUI CSV export?"
-        )
-    data = parse_rows(path, lines[1:], 2, columns)
-    t = data[:, 0]
-    bad = np.flatnonzero(np.diff(t) <= 0)
-    if bad.size:
-        i = int(bad[0]) + 1
-        raise FileFormatError(
-            f"{path}: time stamps not increasing at data row {i} (line {i + 2}: "
-            f"{t[i - 1]:.0f} us then {t[i]:.0f} us); sort the rows and drop duplicates"
-        )
-    return data
+    return np.concatenate(list(_blocks(path, columns)))
 
 
 def _is_serial(word: str) -> bool:
@@ -137,6 +142,71 @@ def read_ximu3_sensor(
             f"dropouts longer than {max_mag_gap:g} intervals are gaps (NaN)"
         )
     return ImuRecording(time, gyr, acc, mag, name=label, meta=meta)
+
+
+def iter_ximu3_sensor(
+    directory: str | Path, name: str | None = None, rows: int = 100_000,
+    max_mag_gap: float = 2.5,
+) -> Iterator[ImuRecording]:  # fmt: skip
+    """:func:`read_ximu3_sensor` in pieces of ``rows`` inertial samples, read as it goes
+    (an hour's export in bounded memory); the magnetometer is aligned piece by piece from
+    the samples either side of each piece, so the pieces give the whole reader's numbers."""
+    d = Path(directory)
+    inertial = d / "Inertial.csv"
+    if not inertial.is_file():
+        raise FileFormatError(f"{d}: no Inertial.csv; is this an x-IMU3 sensor export directory?")
+    label = name or sensor_name(d)
+    meta: dict[str, object] = {"source": str(d), "format": "x-IMU3", "mag_unit": "a.u."}
+    mag_file = d / "Magnetometer.csv"
+    mag = _MagCursor(mag_file, rows, max_mag_gap) if mag_file.is_file() else None
+    for data in _blocks(inertial, INERTIAL_COLUMNS, rows):
+        time = data[:, 0] * 1e-6
+        m = None if mag is None else mag.at(time)
+        yield ImuRecording(time, np.radians(data[:, 1:4]), data[:, 4:7] * STANDARD_GRAVITY, m,
+                           name=label, meta=dict(meta))  # fmt: skip
+
+
+class _MagCursor:
+    """Magnetometer.csv read forwards, block by block, aligned (as :func:`align_mag`) onto
+    increasing inertial times; the dropout limit uses the whole file's median interval (a
+    first pass over it)."""
+
+    def __init__(self, path: Path, rows: int, max_gap: float) -> None:
+        steps: list[FloatArray] = []
+        last: float | None = None
+        self.first = self.last = float("nan")
+        for data in _blocks(path, MAG_COLUMNS, rows):
+            t = data[:, 0] * 1e-6
+            steps.append(np.diff(t if last is None else np.concatenate([[last], t])))
+            if last is None:
+                self.first = float(t[0])
+            last = float(t[-1])
+        self.last = float(last) if last is not None else float("nan")
+        all_steps = np.concatenate(steps) if steps else np.zeros(0)
+        self.limit = max_gap * float(np.median(all_steps)) if all_steps.size else np.inf
+        self._blocks = _blocks(path, MAG_COLUMNS, rows)
+        self._t = np.zeros(0)
+        self._m = np.zeros((0, 3))
+        self._done = False
+
+    def at(self, t: FloatArray) -> FloatArray:
+        """The field at the inertial times ``t`` (NaN outside the file or in dropouts)."""
+        while not self._done and (self._t.size == 0 or self._t[-1] < t[-1]):
+            block = next(self._blocks, None)
+            if block is None:
+                self._done = True
+                break
+            self._t = np.concatenate([self._t, block[:, 0] * 1e-6])
+            self._m = np.concatenate([self._m, block[:, 1:4]])
+        out, _ = align_mag(t, self._t, self._m, np.inf)
+        outside = (t < self.first) | (t > self.last)
+        if self._t.size > 1:
+            j = np.clip(np.searchsorted(self._t, t), 1, self._t.size - 1)
+            outside |= (self._t[j] - self._t[j - 1]) > self.limit
+        out[outside] = np.nan
+        keep = max(0, int(np.searchsorted(self._t, t[-1])) - 1)  # the sample before the
+        self._t, self._m = self._t[keep:], self._m[keep:]  # next piece's first time
+        return out
 
 
 def read_ximu3_quaternion(directory: str | Path, name: str | None = None) -> OrientationSeries:

@@ -1,0 +1,97 @@
+"""Time and peak memory of ``mocapkit imu run`` on a multi-sensor x-IMU3 export against
+its length (issue 16: several sensors on their own clocks).
+
+    python -m benchmarks.memory_ximu3 [--minutes 1 10 60] [--write-docs]
+
+The 7-sensor x-IMU3 lower-body export in ../shared (18.6 s at 50 Hz, each sensor on its
+own clock) is repeated, each sensor's ``Inertial.csv`` and ``Magnetometer.csv`` shifted by
+the recording's length each time, to the length asked for, and run through ``mocapkit imu
+run DIR --filter polaris -o OUT.sto`` (online, 9D) as a whole process: every sensor
+filtered piece by piece into a file on disk, then all resampled onto one time base and
+written a piece at a time (``mocapkit.imu.sensor_spill``). Reported: wall time and the
+child's peak resident memory. Target (issue 16): within 2x from 1 min to 1 h.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+from benchmarks._docs import write_section
+from benchmarks.memory_vs_length import measure
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+EXPORT = SHARED / "ximu3-lower-body"
+
+
+def _tile(src: Path, dst: Path, copies: int) -> None:
+    """``src`` CSV (time stamps in us in the first column) repeated ``copies`` times,
+    each copy shifted by the file's span plus one interval."""
+    lines = src.read_text().splitlines()
+    head, rows = lines[0], [r for r in lines[1:] if r.strip()]
+    times = [int(float(r.split(",", 1)[0])) for r in rows]
+    shift = times[-1] - times[0] + (times[-1] - times[-2])
+    with open(dst, "w") as f:
+        f.write(head + "\n")
+        for k in range(copies):
+            off = k * shift
+            f.write("\n".join(f"{t + off}," + r.split(",", 1)[1]
+                              for t, r in zip(times, rows, strict=True)) + "\n")  # fmt: skip
+
+
+def long_export(dst: Path, minutes: float) -> int:
+    """The export repeated to ``minutes``; returns the copies."""
+    first = next(p for p in EXPORT.iterdir() if p.is_dir())
+    lines = (first / "Inertial.csv").read_text().splitlines()[1:]
+    span_s = (float(lines[-1].split(",")[0]) - float(lines[0].split(",")[0])) * 1e-6
+    copies = max(1, round(minutes * 60.0 / span_s))
+    for sensor in (p for p in EXPORT.iterdir() if p.is_dir()):
+        out = dst / sensor.name
+        out.mkdir(parents=True)
+        shutil.copy(sensor / "Command.json", out / "Command.json")
+        for name in ("Inertial.csv", "Magnetometer.csv"):
+            _tile(sensor / name, out / name, copies)
+    return copies
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, nargs="+", default=[1.0, 10.0, 60.0])
+    parser.add_argument("--write-docs", action="store_true")
+    args = parser.parse_args()
+    if not EXPORT.exists():
+        raise SystemExit(f"needs {EXPORT}")
+    exe = [sys.executable, "-c", "from mocapkit.cli.main import run; run()"]
+    rows = []
+    for minutes in args.minutes:
+        with tempfile.TemporaryDirectory() as d:
+            src = Path(d) / "export"
+            copies = long_export(src, minutes)
+            m = measure([*exe, "imu", "run", str(src), "--filter", "polaris",
+                         "-o", str(Path(d) / "out.sto")])  # fmt: skip
+        rows.append((minutes, copies, m))
+        print(minutes, copies, m, flush=True)
+    lines = ["| recording | sensors x samples | whole process [s] | peak memory [MB] |",
+             "|---:|---:|---:|---:|"]  # fmt: skip
+    for minutes, copies, m in rows:
+        lines.append(f"| {minutes:g} min | 7 x {copies * 921} | {m['seconds']:.1f} | "
+                     f"{m['peak_mb']:.0f} |")  # fmt: skip
+    growth = rows[-1][2]["peak_mb"] / rows[0][2]["peak_mb"]
+    lengths = " ".join(f"{x:g}" for x in args.minutes)
+    text = (
+        f"`python -m benchmarks.memory_ximu3 --minutes {lengths}` (the 7-sensor x-IMU3 "
+        "lower-body export repeated to the length, 50 Hz, each sensor on its own clock; "
+        "`mocapkit imu run DIR --filter polaris`, online 9D, whole processes). Peak memory "
+        f"from the shortest to the longest: x{growth:.1f} (target: within x2).\n\n"
+        + "\n".join(lines)
+    )
+    print(text)
+    if args.write_docs:
+        write_section("Memory and time against recording length: x-IMU3 export", text)
+
+
+if __name__ == "__main__":
+    main()
