@@ -1,0 +1,87 @@
+"""Time and peak memory of ``mocapkit retarget`` against recording length (issue 16).
+
+    python -m benchmarks.memory_retarget [--minutes 1 10 60] [--robot g1] [--write-docs]
+
+OpenSim's gait2392 walk (``subject01_walk1.trc`` in ../shared), reconstructed once by
+``mocapkit markers reconstruct`` into joint angles, is played forwards then backwards to
+the length asked for (continuous) and written as a .mot; ``mocapkit retarget WALK.mot
+--robot g1 -o OUT.csv`` (collision guard on, as by default) runs on it as a whole process.
+Reported: wall time and the child's peak resident memory. Target (issue 16): within 2x
+from 1 min to 1 h.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks._docs import write_section
+from benchmarks.memory_vs_length import measure
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+TRC = SHARED / "opensim" / "gait2392" / "subject01_walk1.trc"
+CLI = [sys.executable, "-c", "from mocapkit.cli.main import run; run()"]
+
+
+def long_angles(walk: Path, path: Path, minutes: float) -> int:
+    """The reconstructed walk's .mot ping-ponged to ``minutes``; returns its frames."""
+    from mocapkit.io.opensim_table import read_table, write_table
+
+    table = read_table(walk)
+    rate = 1.0 / float(np.median(np.diff(table.time)))
+    there_and_back = np.concatenate([table.data, table.data[-2:0:-1]])
+    n = round(minutes * 60.0 * rate)
+    reps = -(-n // there_and_back.shape[0])
+    data = np.concatenate([there_and_back] * reps)[:n]
+    write_table(path, np.arange(n) / rate, table.labels, data, name="walk", in_degrees=True)
+    return n
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, nargs="+", default=[1.0, 10.0, 60.0])
+    parser.add_argument("--robot", default="g1")
+    parser.add_argument("--write-docs", action="store_true")
+    args = parser.parse_args()
+    if not TRC.exists():
+        raise SystemExit(f"needs {TRC}")
+    rows = []
+    with tempfile.TemporaryDirectory() as d:
+        walk = Path(d) / "walk.mot"
+        subprocess.run([*CLI, "markers", "reconstruct", str(TRC), "--height-m", "1.80",
+                        "-o", str(walk)], check=True, capture_output=True)  # fmt: skip
+        for minutes in args.minutes:
+            src = Path(d) / f"walk_{minutes:g}min.mot"
+            frames = long_angles(walk, src, minutes)
+            m = measure([*CLI, "retarget", str(src), "--robot", args.robot,
+                         "-o", str(Path(d) / "out.csv")])  # fmt: skip
+            rows.append((minutes, frames, m))
+            print(minutes, frames, m, flush=True)
+            src.unlink()
+    lines = ["| recording | frames | whole process [s] | frames/s | peak memory [MB] |",
+             "|---:|---:|---:|---:|---:|"]  # fmt: skip
+    for minutes, frames, m in rows:
+        lines.append(f"| {minutes:g} min | {frames} | {m['seconds']:.1f} | "
+                     f"{frames / m['seconds']:.0f} | {m['peak_mb']:.0f} |")  # fmt: skip
+    growth = rows[-1][2]["peak_mb"] / rows[0][2]["peak_mb"]
+    lengths = " ".join(f"{x:g}" for x in args.minutes)
+    text = (
+        f"`python -m benchmarks.memory_retarget --minutes {lengths} --robot {args.robot}` "
+        "(OpenSim's gait2392 walk reconstructed by mocapkit, its joint angles played "
+        "forwards and backwards to the length at 60 Hz; `mocapkit retarget WALK.mot --robot "
+        f"{args.robot} -o OUT.csv`, collision guard on, whole processes). Peak memory from "
+        f"the shortest to the longest: x{growth:.1f} (target: within x2).\n\n"
+        + "\n".join(lines)
+    )
+    print(text)
+    if args.write_docs:
+        write_section("Memory and time against recording length: retarget", text)
+
+
+if __name__ == "__main__":
+    main()
