@@ -431,4 +431,7 @@ class TrcWriter:
         return self
 
     def __exit__(self, *exc: Any) -> None:
+        if exc[0] is not None:  # an error on the way: it is the one to report
+            self._f.close()
+            return
         self.close()
