@@ -75,8 +75,7 @@ def main() -> None:
         "(OpenSim's gait2392 walk reconstructed by mocapkit, its joint angles played "
         "forwards and backwards to the length at 60 Hz; `mocapkit retarget WALK.mot --robot "
         f"{args.robot} -o OUT.csv`, collision guard on, whole processes). Peak memory from "
-        f"the shortest to the longest: x{growth:.1f} (target: within x2).\n\n"
-        + "\n".join(lines)
+        f"the shortest to the longest: x{growth:.1f} (target: within x2).\n\n" + "\n".join(lines)
     )
     print(text)
     if args.write_docs:
