@@ -19,8 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks._docs import write_section
-from benchmarks.memory_vs_length import measure
+from benchmarks.memory_vs_length import length_report, measure
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 TRC = SHARED / "opensim" / "gait2392" / "subject01_walk1.trc"
@@ -59,23 +58,13 @@ def main() -> None:
                          "-o", str(Path(d) / "out.mot")])  # fmt: skip
             rows.append((minutes, frames, m))
             print(minutes, frames, m, flush=True)
-    lines = ["| trial | frames | whole process [s] | frames/s | peak memory [MB] |",
-             "|---:|---:|---:|---:|---:|"]  # fmt: skip
-    for minutes, frames, m in rows:
-        lines.append(f"| {minutes:g} min | {frames} | {m['seconds']:.1f} | "
-                     f"{frames / m['seconds']:.0f} | {m['peak_mb']:.0f} |")  # fmt: skip
-    growth = rows[-1][2]["peak_mb"] / rows[0][2]["peak_mb"]
     lengths = " ".join(f"{x:g}" for x in args.minutes)
-    text = (
-        f"`python -m benchmarks.memory_markers --minutes {lengths}`"
-        " (OpenSim's gait2392 walk played forwards and backwards to the length, 60 Hz, "
+    length_report(
+        rows, f"python -m benchmarks.memory_markers --minutes {lengths}",
+        "OpenSim's gait2392 walk played forwards and backwards to the length, 60 Hz, "
         "`mocapkit markers reconstruct --height-m 1.80`, direct marker control, whole "
-        f"processes). Peak memory from the shortest to the longest: x{growth:.1f} "
-        "(target: within x2).\n\n" + "\n".join(lines)
-    )
-    print(text)
-    if args.write_docs:
-        write_section("Memory and time against recording length: markers", text)
+        "processes", "Memory and time against recording length: markers", args.write_docs,
+    )  # fmt: skip
 
 
 if __name__ == "__main__":

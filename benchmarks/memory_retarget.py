@@ -20,8 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks._docs import write_section
-from benchmarks.memory_vs_length import measure
+from benchmarks.memory_vs_length import length_report, measure
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 TRC = SHARED / "opensim" / "gait2392" / "subject01_walk1.trc"
@@ -63,23 +62,14 @@ def main() -> None:
             rows.append((minutes, frames, m))
             print(minutes, frames, m, flush=True)
             src.unlink()
-    lines = ["| recording | frames | whole process [s] | frames/s | peak memory [MB] |",
-             "|---:|---:|---:|---:|---:|"]  # fmt: skip
-    for minutes, frames, m in rows:
-        lines.append(f"| {minutes:g} min | {frames} | {m['seconds']:.1f} | "
-                     f"{frames / m['seconds']:.0f} | {m['peak_mb']:.0f} |")  # fmt: skip
-    growth = rows[-1][2]["peak_mb"] / rows[0][2]["peak_mb"]
     lengths = " ".join(f"{x:g}" for x in args.minutes)
-    text = (
-        f"`python -m benchmarks.memory_retarget --minutes {lengths} --robot {args.robot}` "
-        "(OpenSim's gait2392 walk reconstructed by mocapkit, its joint angles played "
-        "forwards and backwards to the length at 60 Hz; `mocapkit retarget WALK.mot --robot "
-        f"{args.robot} -o OUT.csv`, collision guard on, whole processes). Peak memory from "
-        f"the shortest to the longest: x{growth:.1f} (target: within x2).\n\n" + "\n".join(lines)
-    )
-    print(text)
-    if args.write_docs:
-        write_section("Memory and time against recording length: retarget", text)
+    length_report(
+        rows, f"python -m benchmarks.memory_retarget --minutes {lengths} --robot {args.robot}",
+        "OpenSim's gait2392 walk reconstructed by mocapkit, its joint angles played forwards "
+        "and backwards to the length at 60 Hz; `mocapkit retarget WALK.mot --robot "
+        f"{args.robot} -o OUT.csv`, collision guard on, whole processes",
+        "Memory and time against recording length: retarget", args.write_docs,
+    )  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ import json
 import subprocess
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +52,38 @@ def measure(argv: list[str]) -> dict[str, float]:
         [sys.executable, "-c", _MEASURE, *argv], capture_output=True, text=True, check=True
     )
     return json.loads(out.stdout)  # type: ignore[no-any-return]
+
+
+def length_report(
+    rows: list[tuple[float, int, dict[str, float]]],
+    command: str,
+    setup: str,
+    section: str,
+    write_docs: bool,
+    count_label: str = "frames",
+    count_cell: Callable[[int], str] = str,
+    rate: bool = True,
+) -> str:
+    """The table of a run against recording length (minutes, count, whole process,
+    ``count / s`` when ``rate``, peak memory), the growth from the shortest to the longest,
+    printed and, with ``write_docs``, written to docs/benchmarks.md under ``section``."""
+    head = ["recording", count_label, "whole process [s]", *(["frames/s"] if rate else []),
+            "peak memory [MB]"]  # fmt: skip
+    lines = ["| " + " | ".join(head) + " |", "|" + "---:|" * len(head)]
+    for minutes, count, m in rows:
+        per_s = [f"{count / m['seconds']:.0f}"] if rate else []
+        cells = [f"{minutes:g} min", count_cell(count), f"{m['seconds']:.1f}", *per_s,
+                 f"{m['peak_mb']:.0f}"]  # fmt: skip
+        lines.append("| " + " | ".join(cells) + " |")
+    growth = rows[-1][2]["peak_mb"] / rows[0][2]["peak_mb"]
+    text = (
+        f"`{command}` ({setup}). Peak memory from the shortest to the longest: "
+        f"x{growth:.1f} (target: within x2).\n\n" + "\n".join(lines)
+    )
+    print(text)
+    if write_docs:
+        write_section(section, text)
+    return text
 
 
 def main() -> None:

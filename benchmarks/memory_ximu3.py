@@ -20,8 +20,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from benchmarks._docs import write_section
-from benchmarks.memory_vs_length import measure
+from benchmarks.memory_vs_length import length_report, measure
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 EXPORT = SHARED / "ximu3-lower-body"
@@ -74,23 +73,14 @@ def main() -> None:
                          "-o", str(Path(d) / "out.sto")])  # fmt: skip
         rows.append((minutes, copies, m))
         print(minutes, copies, m, flush=True)
-    lines = ["| recording | sensors x samples | whole process [s] | peak memory [MB] |",
-             "|---:|---:|---:|---:|"]  # fmt: skip
-    for minutes, copies, m in rows:
-        lines.append(f"| {minutes:g} min | 7 x {copies * 921} | {m['seconds']:.1f} | "
-                     f"{m['peak_mb']:.0f} |")  # fmt: skip
-    growth = rows[-1][2]["peak_mb"] / rows[0][2]["peak_mb"]
     lengths = " ".join(f"{x:g}" for x in args.minutes)
-    text = (
-        f"`python -m benchmarks.memory_ximu3 --minutes {lengths}` (the 7-sensor x-IMU3 "
-        "lower-body export repeated to the length, 50 Hz, each sensor on its own clock; "
-        "`mocapkit imu run DIR --filter polaris`, online 9D, whole processes). Peak memory "
-        f"from the shortest to the longest: x{growth:.1f} (target: within x2).\n\n"
-        + "\n".join(lines)
-    )
-    print(text)
-    if args.write_docs:
-        write_section("Memory and time against recording length: x-IMU3 export", text)
+    length_report(
+        rows, f"python -m benchmarks.memory_ximu3 --minutes {lengths}",
+        "the 7-sensor x-IMU3 lower-body export repeated to the length, 50 Hz, each sensor on "
+        "its own clock; `mocapkit imu run DIR --filter polaris`, online 9D, whole processes",
+        "Memory and time against recording length: x-IMU3 export", args.write_docs,
+        count_label="sensors x samples", count_cell=lambda c: f"7 x {c * 921}", rate=False,
+    )  # fmt: skip
 
 
 if __name__ == "__main__":

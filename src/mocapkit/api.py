@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from mocapkit import _API
 from mocapkit.errors import ConfigError
 from mocapkit.series import JointAngleSeries
 
@@ -314,15 +315,4 @@ def retarget(
                        tuple(res.notes), res)  # fmt: skip
 
 
-__all__ = [
-    "BodyMotion",
-    "Reconstruction",
-    "RobotMotion",
-    "body_angles",
-    "make_filter",
-    "read_c3d",
-    "read_imu",
-    "read_trc",
-    "reconstruct",
-    "retarget",
-]
+__all__ = list(_API)  # the names mocapkit exports lazily (mocapkit/__init__.py)

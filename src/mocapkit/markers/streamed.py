@@ -459,8 +459,10 @@ def reconstruct_streamed(
             _gap_warning(sp, prep, chunk_frames, rate, warn)
             subject = scaled_subject(head, static, ms, height_m, mass_kg, sex, warn)
             plan = plan_tracking(prep.names, subject, opts)
-            result = _track(sp, prep, subject, plan, opts, rate, out, chunk_frames, progress)
-            for msg in result.coverage.warnings() if result.coverage is not None else ():
+            result, tally, coverage = _track(
+                sp, prep, subject, plan, opts, rate, out, chunk_frames, progress
+            )
+            for msg in coverage.warnings():
                 warn.add(msg)
             check_tracking(out.any_fitted, plan, warn)
             written = _write(
@@ -478,8 +480,7 @@ def reconstruct_streamed(
         finally:
             out.close()
             sp.close()
-    metrics = result.meta["tally"].metrics()
-    return StreamedReconstruction(metrics, list(warn), subject, written)
+    return StreamedReconstruction(tally.metrics(), list(warn), subject, written)
 
 
 def _gap_warning(sp: _Spilled, prep: Preparation, chunk: int, rate: float, warn: _Warnings) -> None:
@@ -498,9 +499,9 @@ def _track(
     sp: _Spilled, prep: Preparation, subject: Subject, plan: TrackingPlan,
     opts: ReconstructionOptions, rate: float, out: _Outputs, chunk: int,
     progress: Progress | None,
-) -> ReconstructionResult:  # fmt: skip
-    """Direct marker control piece by piece; returns the last piece's result, whose
-    ``coverage`` and ``meta["tally"]`` hold the whole trial's."""
+) -> tuple[ReconstructionResult, MetricsTally, Coverage]:  # fmt: skip
+    """Direct marker control piece by piece; returns the last piece's result (the
+    columns' names and kinds for the files), the whole trial's figures and coverage."""
     human, names = subject.human, plan.names
     sel = [prep.names.index(nm) for nm in names]
 
@@ -553,6 +554,4 @@ def _track(
         if progress is not None:
             progress("reconstruction", b, sp.n)
     assert result is not None
-    result.coverage = coverage
-    result.meta["tally"] = tally
-    return result
+    return result, tally, coverage
