@@ -52,6 +52,8 @@ MODULES = (
     "mocapkit.markers.streamed",
     "mocapkit.retarget.robot_spec",
     "mocapkit.retarget.run",
+    "mocapkit.retarget.streamed",
+    "mocapkit.retarget.trajectory_io",
     "mocapkit.retarget.live",
     "mocapkit.io.c3d",
     "mocapkit.io.trc",

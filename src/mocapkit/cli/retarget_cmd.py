@@ -26,19 +26,26 @@ examples:
 
 
 def _cmd(args: argparse.Namespace) -> int:
-    from mocapkit.retarget.run import check_output, retarget, write_trajectory
+    from mocapkit.retarget.run import Retargeted, check_output, retarget, write_trajectory
+    from mocapkit.retarget.streamed import StreamedRetarget, retarget_streamed, streamable
 
     if args.output:
         check_output(Path(args.output))  # before the work, not after it
-    res = retarget(
-        args.input, args.robot, height_m=args.height, preset=args.preset,
-        check_collisions=not args.no_collision_check, avoid_collisions=args.avoid_collisions,
-        guard_collisions=not args.allow_collisions,
-    )  # fmt: skip
-    if args.output:
-        write_trajectory(args.output, res)
+    collisions = {
+        "check_collisions": not args.no_collision_check,
+        "avoid_collisions": args.avoid_collisions,
+        "guard_collisions": not args.allow_collisions,
+    }
+    res: Retargeted | StreamedRetarget
+    if streamable(args.input):  # joint angles: piece by piece, in flat memory
+        res = retarget_streamed(args.input, args.robot, args.output, **collisions)
+    else:
+        res = retarget(args.input, args.robot, height_m=args.height, preset=args.preset,
+                       **collisions)  # fmt: skip
+        if args.output:
+            write_trajectory(args.output, res)
     seconds = process_seconds()  # the whole command, as the user's stopwatch sees it
-    n = res.solution.time.size
+    n = res.frames
     f = res.figures
     report = {
         "robot": res.robot.spec.name,
@@ -46,9 +53,7 @@ def _cmd(args: argparse.Namespace) -> int:
         "frames": n,
         "seconds": round(seconds, 3),
         "fps": round(n / seconds, 1) if seconds > 0 else None,
-        "solve_fps": round(n / res.solution.solve_seconds, 1)
-        if res.solution.solve_seconds
-        else None,
+        "solve_fps": round(n / res.solve_seconds, 1) if res.solve_seconds else None,
         "keypoint_rmse_mm": f["keypoint_rmse_mm"],
         "foot_skate_mm": f["foot_skate_mm"],
         "contact_frames": f["contact_frames"],
@@ -57,8 +62,8 @@ def _cmd(args: argparse.Namespace) -> int:
         "collisions": f["collisions"],
         "held_frames": f["held_frames"],
         "collision_guard": {
-            "steered": len(res.solution.kept_apart),
-            "stopped_short": len(res.solution.stopped),
+            "steered": res.steered,
+            "stopped_short": res.stopped_short,
         },
         "notes": res.notes,
         "output": args.output,

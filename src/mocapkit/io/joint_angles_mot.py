@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
-from mocapkit.io.opensim_table import TableWriter, read_table
+from mocapkit.errors import DataError
+from mocapkit.io.opensim_table import TableWriter, iter_table, read_table
 from mocapkit.series import JointAngleSeries
 
 _TRANSLATIONS = ("_tx", "_ty", "_tz")
@@ -63,3 +65,42 @@ def read_joint_angles_mot(path: str | Path) -> JointAngleSeries:
         rot = _rotational(tuple(table.labels))
         values[:, rot] = np.deg2rad(values[:, rot])
     return JointAngleSeries(table.time, tuple(table.labels), values, name=Path(path).stem)
+
+
+def iter_joint_angles_mot(path: str | Path, rows: int = _BLOCK_ROWS) -> Iterator[JointAngleSeries]:
+    """:func:`read_joint_angles_mot` ``rows`` rows at a time (flat memory on an hour): the
+    same checks, and time increasing across the pieces too."""
+    t_last: float | None = None
+    row0 = 0
+    for table in iter_table(path, rows):
+        values = table.data.copy()
+        if table.in_degrees:
+            rot = _rotational(tuple(table.labels))
+            values[:, rot] = np.deg2rad(values[:, rot])
+        _check_rows(path, table.time, values, t_last, row0)
+        yield JointAngleSeries(table.time, tuple(table.labels), values, name=Path(path).stem)
+        if table.time.size:
+            t_last = float(table.time[-1])
+        row0 += table.time.size
+
+
+def _check_rows(
+    path: str | Path, time: np.ndarray, values: np.ndarray, t_last: float | None, row0: int
+) -> None:
+    """A piece's rows checked as :class:`JointAngleSeries` checks a whole file, the bad row
+    named by its number in the file (``row0``: rows before the piece)."""
+    bad_t = np.flatnonzero(~np.isfinite(time))
+    if bad_t.size:
+        raise DataError(f"{path}: time is not a number at row {row0 + int(bad_t[0])}")
+    before = np.concatenate([[t_last], time[:-1]]) if t_last is not None else time[:-1]
+    after = time if t_last is not None else time[1:]
+    back = np.flatnonzero(after <= before)
+    if back.size:
+        i = int(back[0]) + (0 if t_last is not None else 1)
+        raise DataError(
+            f"{path}: time not strictly increasing at row {row0 + i} ({before[back[0]]:.6f} s "
+            f"then {after[back[0]]:.6f} s). Sort the rows and drop duplicates."
+        )
+    inf = np.argwhere(np.isinf(values))
+    if inf.size:
+        raise DataError(f"{path}: infinite value at row {row0 + int(inf[0][0])}")

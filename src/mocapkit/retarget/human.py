@@ -101,11 +101,12 @@ def _on_the_ground(
     n_pos: Mapping[str, FloatArray],
     n_quat: dict[str, FloatArray],
     source: str,
+    ground: float | None = None,
 ) -> HumanMotion:
-    """The motion with its ground at z = 0 (a low percentile of the feet's heights, less
-    the ankle's height) and its neutral pose standing on z = 0."""
-    feet = [p[:, 2] for s, p in pos.items() if s.startswith("foot")]
-    ground = float(np.nanpercentile(np.concatenate(feet), 2.0)) - ANKLE_HEIGHT_M if feet else 0.0
+    """The motion with its ground at z = 0 (``ground``, or :func:`ground_height` of this
+    motion's feet) and its neutral pose standing on z = 0."""
+    if ground is None:
+        ground = ground_height([p for s, p in pos.items() if s.startswith("foot")])
     return HumanMotion(
         time=time,
         pos={s: p - [0.0, 0.0, ground] for s, p in pos.items()},
@@ -114,6 +115,15 @@ def _on_the_ground(
         neutral_quat=n_quat,
         source=source,
     )
+
+
+def ground_height(feet: list[FloatArray]) -> float:
+    """The ground under feet (N, 3) each: a low percentile (2 %) of their heights, less the
+    ankle's height above the sole (0 without feet)."""
+    if not feet:
+        return 0.0
+    heights = np.concatenate([p[:, 2] for p in feet])
+    return float(np.nanpercentile(heights, 2.0)) - ANKLE_HEIGHT_M
 
 
 def _standing(n_pos: Mapping[str, FloatArray]) -> dict[str, FloatArray]:
@@ -135,10 +145,26 @@ def _skeleton() -> tuple[object, dict[str, object]]:
 
 
 def from_coordinates(
-    time: FloatArray, coords: Mapping[str, FloatArray], segments: tuple[str, ...]
-) -> HumanMotion:
+    time: FloatArray, coords: Mapping[str, FloatArray], segments: tuple[str, ...], *,
+    ground: float | None = None, first_height: float | None = None,
+) -> HumanMotion:  # fmt: skip
     """From joint angles on OpenSim's coordinate names (rad; ``pelvis_t?`` in m, OpenSim's
-    y-up ground) through the ``full_body_15`` skeleton."""
+    y-up ground) through the ``full_body_15`` skeleton. A piece of a longer recording
+    gives the same frames as the whole does with the whole's ``ground`` (its
+    :func:`ground_height`, on the segments as ``ground=0.0`` places them) and
+    ``first_height`` (``pelvis_ty`` of its first frame)."""
+    pos, quat, n_pos, n_quat = _coordinate_poses(time, coords, segments, first_height)
+    return _on_the_ground(np.asarray(time, dtype=float), pos, quat, n_pos, n_quat,
+                          "joint angles", ground)  # fmt: skip
+
+
+def _coordinate_poses(
+    time: FloatArray, coords: Mapping[str, FloatArray], segments: tuple[str, ...],
+    first_height: float | None,
+) -> tuple[dict[str, FloatArray], dict[str, FloatArray], dict[str, FloatArray],
+           dict[str, FloatArray]]:  # fmt: skip
+    """Segment positions and orientations over time, and standing (:func:`from_coordinates`),
+    before the ground is placed."""
     from mocapkit.body.simulate import segment_poses
 
     tree_obj, neutral = _skeleton()
@@ -157,7 +183,8 @@ def from_coordinates(
         tx, ty, tz = (np.asarray(coords[c], dtype=float) for c in ("pelvis_tx", "pelvis_ty",
                                                                    "pelvis_tz"))  # fmt: skip
         trans = np.column_stack([tx, -tz, ty])
-        trans[:, 2] -= trans[0, 2]  # the tree's own pelvis height stands for the first frame
+        # the tree's own pelvis height stands for the first frame's
+        trans[:, 2] -= trans[0, 2] if first_height is None else first_height
     pos, quat, n_pos, n_quat = {}, {}, {}, {}
     inverse = {v: k for k, v in TREE_TO_HUMAN.items()}
     for s in segments:
@@ -171,7 +198,7 @@ def from_coordinates(
         quat[s] = p.quat
         n_pos[s] = neutral[inverse[s]].pos[0]  # type: ignore[attr-defined]
         n_quat[s] = neutral[inverse[s]].quat[0]  # type: ignore[attr-defined]
-    return _on_the_ground(np.asarray(time, dtype=float), pos, quat, n_pos, n_quat, "joint angles")
+    return pos, quat, n_pos, n_quat
 
 
 class FrameSkeleton:

@@ -2,11 +2,9 @@
 
 Inputs: a marker trial (C3D/TRC: reconstructed on the way), joint angles on OpenSim's
 coordinate names (.mot/.sto), a BVH (common joint names), or an inertial recording
-(through the body model, automatic calibration). Outputs by extension: ``.csv`` (time,
-base position and quaternion [w, x, y, z], joints [rad]), ``.npz`` (the same arrays with
-names), ``.mcap`` (Foxglove: ``/robot/joints`` joint positions, ``/robot/tf`` the frame
-tree world -> base -> every link with real translations, ``/robot/targets`` the keypoint
-targets; wall-clock timestamps from when the file is written).
+(through the body model, automatic calibration). Outputs by extension (.csv, .npz,
+.mcap): :mod:`mocapkit.retarget.trajectory_io`. The whole recording is held here; the
+command line retargets joint-angle files piece by piece (:mod:`mocapkit.retarget.streamed`).
 """
 
 from __future__ import annotations
@@ -16,18 +14,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from mocapkit.errors import ConfigError
+from mocapkit.retarget.collisions import HullAvoidance, SelfCollision
 from mocapkit.retarget.human import HumanMotion, from_coordinates, from_reconstruction
 from mocapkit.retarget.robot_model import Humanoid, build_humanoid
 from mocapkit.retarget.robot_spec import load_robot_spec
 from mocapkit.retarget.solver import Solution, solve
 from mocapkit.retarget.targets import RetargetWarning, Targets, make_targets
+from mocapkit.retarget.trajectory_io import TrajectoryWriter, check_output
+
+__all__ = ["Retargeted", "check_output", "load_human", "retarget", "write_trajectory"]
 
 MARKER_SUFFIXES = (".c3d", ".trc")
 ANGLE_SUFFIXES = (".mot", ".sto")
-OUTPUT_SUFFIXES = (".csv", ".npz", ".mcap")
 
 
 @dataclass
@@ -38,6 +36,41 @@ class Retargeted:
     solution: Solution
     figures: dict[str, Any]
     notes: list[str]
+
+    @property
+    def frames(self) -> int:
+        return int(self.solution.time.size)
+
+    @property
+    def solve_seconds(self) -> float:
+        return self.solution.solve_seconds
+
+    @property
+    def steered(self) -> int:
+        """Frames the collision guard steered round a collision."""
+        return len(self.solution.kept_apart)
+
+    @property
+    def stopped_short(self) -> int:
+        """Frames the collision guard stopped short of the human's pose."""
+        return len(self.solution.stopped)
+
+
+def robot_and_segments(robot: str | Path) -> tuple[Humanoid, tuple[str, ...]]:
+    """The robot, and the human segments its map uses (keypoints, feet, pelvis)."""
+    spec = load_robot_spec(robot)
+    segments = {k.segment for k in spec.keypoints} | {f.segment for f in spec.feet}
+    return build_humanoid(spec), tuple(sorted(segments | {"pelvis"}))
+
+
+def no_translation_note(name: str, labels: Any) -> list[str]:
+    """The doubt a joint-angle file without the pelvis's translation raises."""
+    if all(c in labels for c in ("pelvis_tx", "pelvis_ty", "pelvis_tz")):
+        return []
+    return [
+        f"{name} has no pelvis translation (pelvis_tx/ty/tz): the robot's pelvis stays "
+        "where it starts and the feet glide"
+    ]
 
 
 def load_human(
@@ -62,13 +95,7 @@ def load_human(
 
         a = read_joint_angles_mot(path)
         coords = {n: a.column(n) for n in a.names}
-        notes = []
-        if not all(c in coords for c in ("pelvis_tx", "pelvis_ty", "pelvis_tz")):
-            notes.append(
-                f"{path.name} has no pelvis translation (pelvis_tx/ty/tz): the robot's "
-                "pelvis stays where it starts and the feet glide"
-            )
-        return from_coordinates(a.time, coords, segments), notes
+        return from_coordinates(a.time, coords, segments), no_translation_note(path.name, a.names)
     from mocapkit.body.pipeline import run_body
     from mocapkit.body.recordings import load_orientations
     from mocapkit.body.sensor_tree import SensorTree
@@ -103,13 +130,9 @@ def retarget(
     stopped short (``solver`` docstring), so no frame has bodies intersecting.
     ``avoid_collisions``: in addition, rows in every frame's QP keep spheres around the
     bodies apart (smoother near contact, ~3x slower)."""
-    from mocapkit.retarget.collisions import SelfCollision
     from mocapkit.retarget.metrics import evaluate
 
-    spec = load_robot_spec(robot)
-    humanoid = build_humanoid(spec)
-    segments = tuple(sorted({k.segment for k in spec.keypoints} | {f.segment for f in spec.feet}
-                            | {"pelvis"}))  # fmt: skip
+    humanoid, segments = robot_and_segments(robot)
     if hasattr(input_path, "subject"):  # a Reconstruction from mocapkit.reconstruct
         motion = from_reconstruction(input_path, segments)
         notes = list(getattr(input_path, "warnings", ()))
@@ -119,98 +142,46 @@ def retarget(
         warnings.simplefilter("always", RetargetWarning)
         targets = make_targets(motion, humanoid)
     notes += [str(w.message) for w in caught]
+    coll, avoid = collision_guards(humanoid, check_collisions, avoid_collisions,
+                                   guard_collisions)  # fmt: skip
+    sol = solve(humanoid, targets, avoid, coll if guard_collisions else None)
+    figures = evaluate(humanoid, targets, sol, coll)
+    notes += sol.warnings + collision_notes(coll, figures, sol.time.size, guard_collisions)
+    return Retargeted(humanoid, motion, targets, sol, figures, notes)
+
+
+def collision_guards(
+    humanoid: Humanoid, check_collisions: bool, avoid_collisions: bool, guard_collisions: bool
+) -> tuple[SelfCollision | None, HullAvoidance | None]:
+    """The meshes' checker (counting, guarding) and the QP's avoidance rows, as asked."""
+    from mocapkit.retarget.collisions import HullAvoidance, SelfCollision
+
     wanted = check_collisions or avoid_collisions or guard_collisions
     coll = SelfCollision(humanoid) if wanted else None
-    avoid = None
-    if avoid_collisions and coll is not None:
-        from mocapkit.retarget.collisions import HullAvoidance
+    avoid = HullAvoidance(coll) if avoid_collisions and coll is not None else None
+    return coll, avoid
 
-        avoid = HullAvoidance(coll)
-    sol = solve(humanoid, targets, avoid, coll if guard_collisions else None)
-    notes += sol.warnings
+
+def collision_notes(
+    coll: SelfCollision | None, figures: dict[str, Any], frames: int, guard_collisions: bool
+) -> list[str]:
+    """What the user must hear about self-collisions after the solve."""
+    notes = []
     if coll is not None and not coll.available:
         notes.append(f"self-collisions not checked: {coll.reason}")
-    figures = evaluate(humanoid, targets, sol, coll)
     hits = figures["collisions"]["frames"]
     if hits:  # exit 0 must not hide a trajectory that drives the robot into itself
         pairs = "; ".join(figures["collisions"]["pairs"])
         notes.append(
-            f"{hits} of {sol.time.size} frames have the robot's bodies intersecting ({pairs}):"
+            f"{hits} of {frames} frames have the robot's bodies intersecting ({pairs}):"
             " do not play it on the robot as it is"
             + ("" if guard_collisions else "; leave the collision guard on to keep them apart")
         )
-    return Retargeted(humanoid, motion, targets, sol, figures, notes)
-
-
-def check_output(path: Path) -> str:
-    """The output format (its suffix), or a refusal naming the ones there are."""
-    suffix = path.suffix.lower()
-    if suffix not in OUTPUT_SUFFIXES:
-        raise ConfigError(
-            f"output {path}: expected one of {', '.join(OUTPUT_SUFFIXES)} (the extension "
-            "picks the format)"
-        )
-    return suffix
+    return notes
 
 
 def write_trajectory(path: str | Path, result: Retargeted) -> Path:
-    """``.csv``, ``.npz`` or ``.mcap`` (module docstring)."""
-    p = Path(path)
-    suffix = check_output(p)
-    robot = result.robot
-    sol = result.solution
-    nb = robot.n_base_q
-    joints = list(robot.joint_names)
-    base = sol.q[:, :nb]
-    q = sol.q[:, nb:]
-    if nb:  # pinocchio's free flyer: xyz + quaternion [x, y, z, w] -> [w, x, y, z]
-        base = np.column_stack([base[:, :3], base[:, 6], base[:, 3:6]])
-    base_names = ["base_x", "base_y", "base_z", "base_qw", "base_qx", "base_qy", "base_qz"][:nb]
-    if suffix == ".mcap":
-        return _write_mcap(p, result)
-    if suffix == ".npz":
-        np.savez(p, time=sol.time, base=base, q=q, joint_names=np.array(joints),
-                 base_names=np.array(base_names), robot=robot.spec.name)  # fmt: skip
-        return p
-    header = ",".join(["time", *base_names, *joints])
-    table = np.column_stack([sol.time, base, q])
-    np.savetxt(p, table, delimiter=",", header=header, comments="", fmt="%.9g")
-    return p
-
-
-def _write_mcap(path: Path, result: Retargeted) -> Path:
-    import time as _time
-
-    import pinocchio as pin
-
-    from mocapkit.geometry import quat_from_matrix
-    from mocapkit.io.foxglove_mcap import FoxgloveMcapWriter
-
-    robot = result.robot
-    model, data = robot.model, robot.model.createData()
-    sol = result.solution
-    t0 = _time.time_ns()
-    names = list(model.names)
-    with FoxgloveMcapWriter(path) as w:
-        for k, t in enumerate(sol.time):
-            t_ns = t0 + round((t - sol.time[0]) * 1e9)
-            q = sol.q[k]
-            pin.forwardKinematics(model, data, q)
-            w.joint_positions("/robot/joints", t_ns, robot.joint_names, q[robot.n_base_q :])
-            tfs = []
-            for j in range(1, model.njoints):
-                parent = int(model.parents[j])
-                m = data.oMi[j] if parent == 0 else data.oMi[parent].actInv(data.oMi[j])
-                frame = "world" if parent == 0 else names[parent]
-                rot = quat_from_matrix(np.array(m.rotation))
-                tfs.append((frame, names[j], np.array(m.translation), rot))
-            w.frame_transforms("/robot/tf", t_ns, tfs)
-            for seg, pos in result.targets.pos.items():
-                target_rot = result.targets.rot.get(seg)
-                qt = (
-                    quat_from_matrix(target_rot[k])
-                    if target_rot is not None
-                    else np.array([1.0, 0.0, 0.0, 0.0])
-                )
-                w.pose_in_frame(f"/robot/targets/{seg}", t_ns, "world", pos[k], qt)
-    return path
+    """``.csv``, ``.npz`` or ``.mcap`` (:mod:`mocapkit.retarget.trajectory_io`)."""
+    with TrajectoryWriter(path, result.robot) as w:
+        w.write(result.solution, result.targets)
+    return Path(path)

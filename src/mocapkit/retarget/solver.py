@@ -121,6 +121,22 @@ class FrameSolver:
         self.feet = [(f, robot.frame_ids[f.frame]) for f in robot.spec.feet]
         dt = np.diff(targets.time)
         self.dt = float(np.median(dt)) if dt.size else 0.01
+        self.offset = 0  # frames before ``targets`` (a piece of a longer recording)
+        self.t_last: float | None = None  # the time of the frame solved last
+        self.first_time: dict[str, float] = {}  # held / stopped -> time of the first such
+
+    def next_piece(self, targets: Targets, offset: int) -> None:
+        """Go on with ``targets``, the frames from ``offset`` on of a longer recording: the
+        same steps as on the whole (the frame time across the seam included)."""
+        self.targets = targets
+        self.offset = offset
+        if self.t_last is not None and targets.time.size:
+            self.dt = float(targets.time[0]) - self.t_last
+
+    def _record(self, kind: list[int], name: str) -> None:
+        """This frame (its index in the whole recording) in ``kind``."""
+        kind.append(self.k_now)
+        self.first_time.setdefault(name, self.t_now)
 
     def _tasks(self, k: int) -> tuple[FloatArray, FloatArray]:
         """Stacked weighted rows (A, b) with cost |A dq - b|^2 (written into one array:
@@ -168,7 +184,8 @@ class FrameSolver:
 
         m = self.robot.model
         first = self.q_last is None  # the start pose: no velocity limit, solved to rest
-        self.k_now = k
+        self.k_now = self.offset + k
+        self.t_now = float(self.targets.time[k])
         q_start = self.q.copy()
         self.n_steps += 1
         # pairs the guard had to part lately keep rows in the QP (hard) for a while
@@ -180,7 +197,7 @@ class FrameSolver:
             q_before = self.q.copy()
             dq = self._iteration(k, first, q_start, avoid, hard=bool(watched), pairs=watched)
             if dq is None:  # not even the joints' bounds and the ground together: hold
-                self.held.append(k)
+                self._record(self.held, "held")
                 break
             self._advance(dq)
             hit = self._collisions() if first else []
@@ -199,6 +216,7 @@ class FrameSolver:
             else (np.zeros(self.nv))
         )
         self.q_last = self.q.copy()
+        self.t_last = self.t_now
         self.q_pred = np.asarray(pin.integrate(m, self.q, step))
         return self.q
 
@@ -269,11 +287,11 @@ class FrameSolver:
         if dq is not None:
             self._advance(dq)
             if not self.guard.any_colliding(self.q):
-                self.kept_apart.append(k)
+                self.kept_apart.append(self.k_now)
                 return
             q_bad = self.q
             hit = self.guard.colliding_pairs(q_bad)
-        self.stopped.append(k)
+        self._record(self.stopped, "stopped")
         # stop only the limbs between the bodies in touch; the rest (the base, the other
         # limbs) goes on, so the robot is not left behind by the human
         q_limbs = self._limbs_stopped(q_free, q_bad, hit)
@@ -429,11 +447,20 @@ def solve(
     """Every frame in order (module docstring); with ``avoid``, bodies are kept apart by
     rows in every frame's QP; with ``guard``, every frame is checked on the meshes and a
     colliding step is steered round or stopped short (:meth:`FrameSolver._keep_apart`)."""
+    solver = FrameSolver(robot, targets, avoid, guard)
+    sol = solve_piece(solver)
+    finish(solver, sol)
+    return sol
+
+
+def solve_piece(solver: FrameSolver) -> Solution:
+    """The frames of ``solver.targets`` in order (a whole recording, or the next piece
+    of one after :meth:`FrameSolver.next_piece`): configurations, keypoints and soles."""
     import time
 
     import pinocchio as pin
 
-    solver = FrameSolver(robot, targets, avoid, guard)
+    robot, targets = solver.robot, solver.targets
     n = targets.time.size
     q_out = np.empty((n, robot.model.nq))
     kp_pos = {k.segment: np.empty((n, 3)) for k in robot.spec.keypoints}
@@ -448,7 +475,11 @@ def solve(
         for f in robot.spec.feet:
             m = robot.data.oMf[robot.frame_ids[f.frame]]
             sole_pos[f.segment][k] = m.translation + m.rotation @ f.sole
-    sol = Solution(targets.time, q_out, kp_pos, sole_pos, time.perf_counter() - t0)
+    return Solution(targets.time, q_out, kp_pos, sole_pos, time.perf_counter() - t0)
+
+
+def finish(solver: FrameSolver, sol: Solution) -> None:
+    """The solver's frame lists and warnings (the whole recording's) into ``sol``."""
     sol.held_frames = list(solver.held)
     sol.kept_apart = sorted(set(solver.kept_apart))
     sol.stopped = sorted(set(solver.stopped))
@@ -461,11 +492,10 @@ def solve(
         sol.warnings.append(
             f"{len(sol.stopped)} frame(s) where the robot stopped short of the human's pose "
             f"to keep its bodies apart, first at frame {sol.stopped[0]} (t = "
-            f"{targets.time[sol.stopped[0]]:.3f} s): the keypoint errors there are larger"
+            f"{solver.first_time['stopped']:.3f} s): the keypoint errors there are larger"
         )
     if solver.held:
         sol.warnings.append(
             f"{len(solver.held)} frame(s) held (no joint step met the limits and the ground), "
-            f"first at frame {solver.held[0]} (t = {targets.time[solver.held[0]]:.3f} s)"
+            f"first at frame {solver.held[0]} (t = {solver.first_time['held']:.3f} s)"
         )
-    return sol

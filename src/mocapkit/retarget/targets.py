@@ -64,6 +64,25 @@ def belt_velocity(motion: HumanMotion, feet: list[str]) -> FloatArray:
     return med
 
 
+def treadmill_note(belt: FloatArray) -> str:
+    """What a user is told when the belt's motion is added back."""
+    return (
+        f"the feet glide backwards at {np.linalg.norm(belt):.2f} m/s while on the ground: "
+        "a treadmill trial. The belt's motion is added back, so the robot walks "
+        "overground at that speed"
+    )
+
+
+def on_belt(motion: HumanMotion, belt: FloatArray, t0: float) -> HumanMotion:
+    """``motion`` with a treadmill belt's travel since ``t0`` added back."""
+    shift = np.zeros((motion.n_frames, 3))
+    shift[:, :2] = -np.outer(motion.time - t0, belt)
+    return HumanMotion(
+        motion.time, {s: p + shift for s, p in motion.pos.items()}, motion.quat,
+        motion.neutral_pos, motion.neutral_quat, motion.source,
+    )  # fmt: skip
+
+
 @dataclass(frozen=True)
 class Targets:
     time: FloatArray
@@ -132,11 +151,15 @@ def make_targets(
     *,
     start: tuple[FloatArray, FloatArray] | None = None,
     contact: dict[str, np.ndarray] | None = None,
+    belt: tuple[FloatArray, float] | None = None,
 ) -> Targets:
     """Targets for every frame of ``motion`` (module docstring). ``start``: the heading
     alignment (3, 3) and origin (3,) to use instead of the first frame's (a live stream
     keeps its first frame's); ``contact``: the feet's contact flags instead of detecting
-    them (a live stream detects them as it goes). The alignment used is ``Targets.start``."""
+    them (a live stream detects them as it goes). The alignment used is ``Targets.start``.
+    ``belt``: a treadmill belt's velocity (2,) and the time its travel counts from, to add
+    back instead of finding it in ``motion`` (found only when contacts are detected here;
+    a piece of a longer recording passes the whole's)."""
 
     spec = robot.spec
     kps = {k.segment for k in spec.keypoints}
@@ -150,23 +173,16 @@ def make_targets(
             f"robot {spec.name} needs the human segment(s) {', '.join(missing)}, which this "
             f"motion ({motion.source}) does not have"
         )
-    belt = belt_velocity(motion, sorted(feet)) if contact is None else np.zeros(2)
-    if belt.any():
-        import warnings
+    if belt is None:
+        found = belt_velocity(motion, sorted(feet)) if contact is None else np.zeros(2)
+        if found.any():
+            import warnings
 
-        warnings.warn(
-            f"the feet glide backwards at {np.linalg.norm(belt):.2f} m/s while on the ground: "
-            "a treadmill trial. The belt's motion is added back, so the robot walks "
-            "overground at that speed",
-            RetargetWarning,
-            stacklevel=2,
-        )
-        shift = np.zeros((motion.n_frames, 3))
-        shift[:, :2] = -np.outer(motion.time - motion.time[0], belt)
-        motion = HumanMotion(
-            motion.time, {s: p + shift for s, p in motion.pos.items()}, motion.quat,
-            motion.neutral_pos, motion.neutral_quat, motion.source,
-        )  # fmt: skip
+            warnings.warn(treadmill_note(found), RetargetWarning, stacklevel=2)
+        belt = (found, float(motion.time[0]))
+    if belt[0].any():
+        motion = on_belt(motion, *belt)
+    velocity = belt[0]
     frame_of = {k.segment: k.frame for k in spec.keypoints}  # (feet's sole frames apart)
     if not spec.floating_base:  # the fixed root stands for the pelvis
         frame_of["pelvis"] = str(spec.root_frame)
@@ -225,4 +241,4 @@ def make_targets(
         rot_t[s] = delta @ ref_rot[s]
     if contact is None:
         contact = {f: detect_contacts(motion, f) for f in feet}
-    return Targets(motion.time, pos_t, rot_t, contact, scale, belt, (align, origin))
+    return Targets(motion.time, pos_t, rot_t, contact, scale, velocity, (align, origin))

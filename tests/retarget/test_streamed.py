@@ -1,0 +1,130 @@
+"""Joint-angle files retargeted piece by piece (retarget.streamed) against the whole path."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocapkit.errors import DataError
+from mocapkit.retarget.run import retarget, write_trajectory
+from mocapkit.retarget.streamed import retarget_streamed
+from tests.body.synth import write_walk_mot
+
+# two runs of the whole path differ this much (the QP's sums follow the arrays' places in
+# memory, and a frame's second iteration is a threshold: retarget.streamed docstring); the
+# pieces must not differ more: mostly ~1e-6, up to ~1e-3 rad after such a flip
+SOLVER_NOISE_RAD = 1e-2
+SOLVER_NOISE_MEDIAN_RAD = 1e-4
+
+
+def _close(a: np.ndarray, b: np.ndarray) -> None:
+    e = np.abs(a - b).reshape(len(a), -1).max(axis=1)
+    assert e.max() < SOLVER_NOISE_RAD
+    assert np.median(e) < SOLVER_NOISE_MEDIAN_RAD
+
+
+def _same_figures(a: dict, b: dict) -> None:
+    assert a["keypoint_rmse_mm"] == pytest.approx(b["keypoint_rmse_mm"], abs=0.15)
+    assert a["foot_skate_mm"] == pytest.approx(b["foot_skate_mm"], abs=0.01)
+    for key in ("contact_frames", "ground_penetration", "limit_violations", "held_frames"):
+        assert a[key] == b[key], key
+    assert a["collisions"]["frames"] == b["collisions"]["frames"]
+
+
+@pytest.mark.parametrize(("speed", "suffix"), [(1.2, ".csv"), (0.0, ".npz")])
+def test_pieces_give_the_whole_paths_trajectory_figures_and_notes(tmp_path, speed, suffix):
+    """Overground (translation in the file) and on a treadmill (the belt found over the
+    whole recording, added back across the seams), 37-frame pieces."""
+    still = 0.5 if speed else 0.0  # a still start would hide the belt
+    mot = write_walk_mot(tmp_path / "walk.mot", duration_s=4.0, still_s=still, speed=speed)
+    whole = retarget(mot, "g1")
+    write_trajectory(tmp_path / f"whole{suffix}", whole)
+    out = tmp_path / f"pieces{suffix}"
+    res = retarget_streamed(mot, "g1", out, piece_frames=37)
+    assert res.frames == whole.frames
+    assert res.notes == whole.notes
+    assert any("treadmill" in n for n in res.notes) == (speed == 0.0)
+    assert (res.steered, res.stopped_short) == (whole.steered, whole.stopped_short)
+    _same_figures(res.figures, whole.figures)
+    if suffix == ".csv":
+        a = np.loadtxt(tmp_path / "whole.csv", delimiter=",", skiprows=1)
+        b = np.loadtxt(out, delimiter=",", skiprows=1)
+        assert (
+            out.read_text().splitlines()[0] == (tmp_path / "whole.csv").read_text().split("\n")[0]
+        )
+        assert a.shape == b.shape
+        _close(a, b)
+    else:
+        with np.load(tmp_path / "whole.npz") as a, np.load(out) as b:
+            assert sorted(a.files) == sorted(b.files)
+            for k in a.files:
+                assert a[k].shape == b[k].shape, k
+                assert a[k].dtype == b[k].dtype, k
+                if a[k].dtype.kind == "f":
+                    _close(a[k], b[k])
+                else:
+                    assert np.array_equal(a[k], b[k]), k
+    assert not list(tmp_path.glob("*.rows"))  # the npz rows' spill is gone
+
+
+def test_mcap_in_pieces_holds_every_frame(tmp_path):
+    from mcap.reader import make_reader
+
+    mot = write_walk_mot(tmp_path / "walk.mot", duration_s=1.0, still_s=0.5)
+    out = tmp_path / "g1.mcap"
+    res = retarget_streamed(mot, "g1", out, piece_frames=23)
+    with open(out, "rb") as f:
+        topics = [ch.topic for _, ch, _ in make_reader(f).iter_messages()]
+    assert topics.count("/robot/joints") == res.frames
+    assert topics.count("/robot/tf") == res.frames
+
+
+def _rows(mot) -> list[str]:
+    lines = mot.read_text().splitlines()
+    head = next(i for i, ln in enumerate(lines) if ln.strip().lower() == "endheader") + 2
+    return lines[:head], lines[head:]
+
+
+def test_time_going_back_in_a_later_piece_is_named_by_row(tmp_path):
+    mot = write_walk_mot(tmp_path / "walk.mot", duration_s=1.0, still_s=0.5)
+    head, rows = _rows(mot)
+    rows[60], rows[61] = rows[61], rows[60]
+    mot.write_text("\n".join(head + rows) + "\n")
+    with pytest.raises(DataError, match="row 61"):
+        retarget_streamed(mot, "g1", tmp_path / "out.csv", piece_frames=25)
+    assert not (tmp_path / "out.csv").exists()
+
+
+def test_an_infinite_angle_is_named_by_row_and_an_empty_file_refused(tmp_path):
+    mot = write_walk_mot(tmp_path / "walk.mot", duration_s=1.0, still_s=0.5)
+    head, rows = _rows(mot)
+    cells = rows[70].split("\t")
+    cells[3] = "inf"
+    bad = tmp_path / "bad.mot"
+    bad.write_text("\n".join([*head, *rows[:70], "\t".join(cells), *rows[71:]]) + "\n")
+    with pytest.raises(DataError, match="row 70"):
+        retarget_streamed(bad, "g1", None, piece_frames=25)
+    empty = tmp_path / "empty.mot"
+    empty.write_text("\n".join(head) + "\n")
+    with pytest.raises(DataError, match="no rows"):
+        retarget_streamed(empty, "g1", None)
+
+
+def _write_then_fail(writer, whole) -> None:
+    with writer as w:
+        w.write(whole.solution, whole.targets)
+        raise RuntimeError("the solve failed")
+
+
+def test_a_failed_run_leaves_no_output(tmp_path):
+    """A trajectory cut short must not look like a whole one."""
+    from mocapkit.retarget.trajectory_io import TrajectoryWriter
+
+    mot = write_walk_mot(tmp_path / "walk.mot", duration_s=0.5, still_s=0.5)
+    whole = retarget(mot, "g1", check_collisions=False, guard_collisions=False)
+    for suffix in (".csv", ".npz", ".mcap"):
+        out = tmp_path / f"cut{suffix}"
+        with pytest.raises(RuntimeError):
+            _write_then_fail(TrajectoryWriter(out, whole.robot), whole)
+        assert not out.exists(), suffix
+        assert not list(tmp_path.glob("*.rows"))
