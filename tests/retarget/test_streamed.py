@@ -128,3 +128,33 @@ def test_a_failed_run_leaves_no_output(tmp_path):
             _write_then_fail(TrajectoryWriter(out, whole.robot), whole)
         assert not out.exists(), suffix
         assert not list(tmp_path.glob("*.rows"))
+
+
+def test_an_orientation_table_goes_through_the_body_model_in_pieces(tmp_path):
+    """An OpenSense quaternion .sto (an IMU recording) was read as joint angles and
+    refused with a shape error; now it goes through the body model, whole or streamed
+    (the angles through a .mot on disk: 10 significant digits, far below the solver's
+    noise)."""
+    from mocapkit.body.calibration import pose_coordinates
+    from mocapkit.body.sensor_tree import SensorTree
+    from mocapkit.io.opensense import write_orientations_sto
+    from tests.body.synth import gait_like, random_mountings, sensor_orientations
+
+    tree = SensorTree.preset("full_body_15")
+    t = np.arange(800) / 100.0
+    coords = gait_like(tree, t, 1.0, pose_coordinates(tree, "npose"), seed=2)
+    mounts = random_mountings(tree, np.random.default_rng(2))
+    sto = write_orientations_sto(
+        tmp_path / "suit.sto", sensor_orientations(tree, t, coords, mounts, heading_rad=0.3)
+    )
+    whole = retarget(sto, "g1")
+    write_trajectory(tmp_path / "whole.csv", whole)
+    out = tmp_path / "pieces.csv"
+    res = retarget_streamed(sto, "g1", out, piece_frames=230)
+    assert res.frames == whole.frames == t.size
+    assert res.notes == whole.notes
+    assert "inertial recording" in res.notes[0]
+    _same_figures(res.figures, whole.figures)
+    a = np.loadtxt(tmp_path / "whole.csv", delimiter=",", skiprows=1)
+    _close(a, np.loadtxt(out, delimiter=",", skiprows=1))
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []

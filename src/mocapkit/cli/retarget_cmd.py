@@ -37,8 +37,9 @@ def _cmd(args: argparse.Namespace) -> int:
         "guard_collisions": not args.allow_collisions,
     }
     res: Retargeted | StreamedRetarget
-    if streamable(args.input):  # joint angles: piece by piece, in flat memory
-        res = retarget_streamed(args.input, args.robot, args.output, **collisions)
+    if streamable(args.input):  # joint angles or orientations: in pieces, flat memory
+        res = retarget_streamed(args.input, args.robot, args.output, preset=args.preset,
+                                **collisions)  # fmt: skip
     else:
         res = retarget(args.input, args.robot, height_m=args.height, preset=args.preset,
                        **collisions)  # fmt: skip

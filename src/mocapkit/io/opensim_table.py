@@ -281,6 +281,21 @@ def iter_table(path: str | Path, rows: int = _BLOCK_ROWS) -> Iterator[OpenSimTab
         raise FileFormatError(f"{p}: not a text file ({exc})") from exc
 
 
+def table_is_quaternion(path: str | Path) -> bool:
+    """Whether a ``.mot``/``.sto`` holds quaternions (OpenSense orientations), from its
+    header and first row only."""
+    p = Path(path)
+    try:
+        with open(p, encoding="utf-8") as f:
+            header, _ = _read_header(p, f)
+            first = next((ln for ln in f if ln.strip()), "").split("\t")
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(f"{p}: not a text file ({exc})") from exc
+    return header.get("DataType", "").lower() == "quaternion" or (
+        len(first) > 1 and "," in first[1]
+    )
+
+
 def _read_header(p: Path, f: Any) -> tuple[dict[str, str], list[str]]:
     """The header's ``key=value`` lines and the column labels after ``time``."""
     header: dict[str, str] = {}

@@ -2,7 +2,8 @@
 
 Inputs: a marker trial (C3D/TRC: reconstructed on the way), joint angles on OpenSim's
 coordinate names (.mot/.sto), a BVH (common joint names), or an inertial recording
-(through the body model, automatic calibration). Outputs by extension (.csv, .npz,
+(sensor orientations: an OpenSense quaternion .sto, a qmt .mat, an x-IMU3 export; through
+the body model, automatic calibration). Outputs by extension (.csv, .npz,
 .mcap): :mod:`mocapkit.retarget.trajectory_io`. The whole recording is held here; the
 command line retargets joint-angle files piece by piece (:mod:`mocapkit.retarget.streamed`).
 """
@@ -14,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from mocapkit.io.opensim_table import table_is_quaternion
 from mocapkit.retarget.collisions import HullAvoidance, SelfCollision
 from mocapkit.retarget.human import HumanMotion, from_coordinates, from_reconstruction
 from mocapkit.retarget.robot_model import Humanoid, build_humanoid
@@ -25,6 +27,10 @@ from mocapkit.retarget.trajectory_io import TrajectoryWriter, check_output
 __all__ = ["Retargeted", "check_output", "load_human", "retarget", "write_trajectory"]
 
 MARKER_SUFFIXES = (".c3d", ".trc")
+INERTIAL_NOTE = (
+    "an inertial recording has no positions: the robot's pelvis stays where it starts "
+    "(walking becomes walking on the spot) and only the joint angles are retargeted"
+)
 ANGLE_SUFFIXES = (".mot", ".sto")
 
 
@@ -90,7 +96,7 @@ def load_human(
         from mocapkit.retarget.human import from_bvh
 
         return from_bvh(path, segments)
-    if suffix in ANGLE_SUFFIXES:
+    if suffix in ANGLE_SUFFIXES and not table_is_quaternion(path):
         from mocapkit.io.joint_angles_mot import read_joint_angles_mot
 
         a = read_joint_angles_mot(path)
@@ -106,11 +112,7 @@ def load_human(
     res = run_body(SensorTree.preset(preset), oris, calibration="auto", heading_alignment=align)
     a = res.body.angles
     coords = {n: a.column(n) for n in a.names}
-    note = (
-        "an inertial recording has no positions: the robot's pelvis stays where it starts "
-        "(walking becomes walking on the spot) and only the joint angles are retargeted"
-    )
-    return from_coordinates(a.time, coords, segments), [note]
+    return from_coordinates(a.time, coords, segments), [INERTIAL_NOTE]
 
 
 def retarget(
@@ -154,8 +156,6 @@ def collision_guards(
     humanoid: Humanoid, check_collisions: bool, avoid_collisions: bool, guard_collisions: bool
 ) -> tuple[SelfCollision | None, HullAvoidance | None]:
     """The meshes' checker (counting, guarding) and the QP's avoidance rows, as asked."""
-    from mocapkit.retarget.collisions import HullAvoidance, SelfCollision
-
     wanted = check_collisions or avoid_collisions or guard_collisions
     coll = SelfCollision(humanoid) if wanted else None
     avoid = HullAvoidance(coll) if avoid_collisions and coll is not None else None

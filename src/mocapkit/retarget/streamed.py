@@ -34,6 +34,7 @@ import numpy as np
 from mocapkit._validate import FloatArray
 from mocapkit.errors import DataError
 from mocapkit.io.joint_angles_mot import iter_joint_angles_mot
+from mocapkit.io.opensim_table import table_is_quaternion
 from mocapkit.retarget.human import HumanMotion, from_coordinates, ground_height
 from mocapkit.retarget.robot_model import Humanoid
 from mocapkit.retarget.targets import (
@@ -50,7 +51,8 @@ ANGLE_SUFFIXES = (".mot", ".sto")
 
 
 def streamable(path: str | Path) -> bool:
-    """Whether ``path`` is retargeted piece by piece (a joint-angle file)."""
+    """Whether ``path`` is retargeted piece by piece: a joint-angle file, or an OpenSense
+    orientation table (:func:`retarget_orientations_streamed`)."""
     return Path(path).suffix.lower() in ANGLE_SUFFIXES
 
 
@@ -89,8 +91,10 @@ def _first_height(coords: dict[str, FloatArray]) -> float | None:
     return None
 
 
-def _scan(path: Path, robot: Humanoid, segments: tuple[str, ...], rows: int) -> _Scan:
-    from mocapkit.retarget.run import no_translation_note
+def _scan(
+    path: Path, robot: Humanoid, segments: tuple[str, ...], rows: int, inertial: bool
+) -> _Scan:
+    from mocapkit.retarget.run import INERTIAL_NOTE, no_translation_note
 
     feet = sorted({f.segment for f in robot.spec.feet})
     grounding = sorted(s for s in segments if s.startswith("foot"))
@@ -102,7 +106,7 @@ def _scan(path: Path, robot: Humanoid, segments: tuple[str, ...], rows: int) -> 
         coords = _coordinates(piece)
         if k == 0:
             first_height = _first_height(coords)
-            notes = no_translation_note(path.name, piece.names)
+            notes = [INERTIAL_NOTE] if inertial else no_translation_note(path.name, piece.names)
         motion = from_coordinates(piece.time, coords, segments, ground=0.0,
                                   first_height=first_height)  # fmt: skip
         times.append(np.asarray(piece.time))
@@ -133,9 +137,14 @@ def retarget_streamed(
     avoid_collisions: bool = False,
     guard_collisions: bool = True,
     piece_frames: int = PIECE_FRAMES,
+    inertial: bool = False,
+    preset: str = "full_body_15",
 ) -> StreamedRetarget:
     """``retarget(input_path, robot, ...)`` then ``write_trajectory(output, ...)`` for a
-    joint-angle file, in flat memory (module docstring)."""
+    joint-angle file, in flat memory (module docstring); an orientation table goes to
+    :func:`retarget_orientations_streamed` (``preset``: its sensor tree). ``inertial``: the
+    angles come from an inertial recording (the notes say so, not that the file lacks
+    translation)."""
     from mocapkit.retarget.metrics import FigureTally
     from mocapkit.retarget.run import collision_guards, collision_notes, robot_and_segments
     from mocapkit.retarget.solver import FrameSolver, Solution, finish, solve_piece
@@ -145,7 +154,13 @@ def retarget_streamed(
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file or directory")
     humanoid, segments = robot_and_segments(robot)
-    scan = _scan(path, humanoid, segments, piece_frames)
+    if table_is_quaternion(path):
+        return retarget_orientations_streamed(
+            path, robot, output, check_collisions=check_collisions,
+            avoid_collisions=avoid_collisions, guard_collisions=guard_collisions,
+            preset=preset, piece_frames=piece_frames,
+        )  # fmt: skip
+    scan = _scan(path, humanoid, segments, piece_frames, inertial)
     coll, avoid = collision_guards(humanoid, check_collisions, avoid_collisions,
                                    guard_collisions)  # fmt: skip
     tally = FigureTally(humanoid, coll)
@@ -188,3 +203,35 @@ def retarget_streamed(
     notes += collision_notes(coll, figures, a, guard_collisions)
     return StreamedRetarget(humanoid, a, seconds, figures, notes, len(summary.kept_apart),
                             len(summary.stopped))  # fmt: skip
+
+
+def retarget_orientations_streamed(
+    path: str | Path,
+    robot: str | Path,
+    output: str | Path | None = None,
+    *,
+    preset: str = "full_body_15",
+    piece_frames: int = PIECE_FRAMES,
+    check_collisions: bool = True,
+    avoid_collisions: bool = False,
+    guard_collisions: bool = True,
+) -> StreamedRetarget:
+    """An OpenSense orientation table (an inertial recording) onto ``robot`` in flat
+    memory: the body model streams its joint angles into a ``.mot`` on disk
+    (:func:`mocapkit.body.streamed.stream_body`, automatic calibration from the start of
+    the recording, as ``body angles`` does), which is then retargeted in pieces."""
+    import tempfile
+
+    from mocapkit.body.sensor_tree import SensorTree
+    from mocapkit.body.streamed import stream_body
+
+    out_dir = Path(output).parent if output is not None else None
+    with tempfile.TemporaryDirectory(dir=out_dir, prefix=".mocapkit-retarget-") as d:
+        angles = Path(d) / f"{Path(path).stem}.mot"
+        stream_body(SensorTree.preset(preset), path, output=angles, calibration="auto",
+                    heading_alignment="shared", rows=piece_frames)  # fmt: skip
+        return retarget_streamed(
+            angles, robot, output, check_collisions=check_collisions,
+            avoid_collisions=avoid_collisions, guard_collisions=guard_collisions,
+            piece_frames=piece_frames, inertial=True,
+        )  # fmt: skip
