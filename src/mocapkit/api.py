@@ -69,25 +69,12 @@ def reconstruct(
 
     ``height_m`` None: estimated from the markers (warned); ``markerset`` None: chosen
     from the trial's labels (or refused with the markers named)."""
-    import logging
-
+    from mocapkit._logged import logged_warnings
     from mocapkit.markers.reconstruct import ReconstructionOptions, run
 
-    warned: list[str] = []
-
-    class _Collect(logging.Handler):
-        def emit(self, record: logging.LogRecord) -> None:
-            if record.levelno >= logging.WARNING:
-                warned.append(record.getMessage())
-
-    handler = _Collect()
-    logger = logging.getLogger("mocapkit")
-    logger.addHandler(handler)
-    try:
+    with logged_warnings() as warned:
         opts = ReconstructionOptions(method=method, start_s=start_s, end_s=end_s)  # type: ignore[arg-type]
         result, subject, cleaning = run(trial, static, markerset, height_m, mass_kg, opts)
-    finally:
-        logger.removeHandler(handler)
     keep = [k for k in range(len(result.coordinate_names))
             if np.isfinite(result.coordinates[:, k]).any()]  # fmt: skip
     angles = JointAngleSeries(

@@ -37,9 +37,9 @@ def _cmd(args: argparse.Namespace) -> int:
         "guard_collisions": not args.allow_collisions,
     }
     res: Retargeted | StreamedRetarget
-    if streamable(args.input):  # joint angles or orientations: in pieces, flat memory
+    if streamable(args.input):  # angles, orientations, markers: in pieces, flat memory
         res = retarget_streamed(args.input, args.robot, args.output, preset=args.preset,
-                                **collisions)  # fmt: skip
+                                height_m=args.height, **collisions)  # fmt: skip
     else:
         res = retarget(args.input, args.robot, height_m=args.height, preset=args.preset,
                        **collisions)  # fmt: skip

@@ -29,7 +29,7 @@ from __future__ import annotations
 import logging
 import tempfile
 import time as _time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -421,7 +421,7 @@ def reconstruct_streamed(
     height_m: float | None,
     mass_kg: float | None,
     options: ReconstructionOptions,
-    output: str | Path,
+    output: str | Path | None,
     *,
     sex: Sex = "male",
     ik_setup: str | Path | None = None,
@@ -429,9 +429,12 @@ def reconstruct_streamed(
     tracked_c3d: str | Path | None = None,
     progress: Progress | None = None,
     chunk_frames: int = CHUNK_FRAMES,
+    on_piece: Callable[[ReconstructionResult], None] | None = None,
 ) -> StreamedReconstruction:
     """``markers reconstruct`` piece by piece (module docstring): the same arguments as
-    :func:`mocapkit.markers.reconstruct.run`, and the files to write."""
+    :func:`mocapkit.markers.reconstruct.run`, and the files to write (``output`` None:
+    none). ``on_piece``: called with each piece's result as it is built, in order (the
+    streamed retargeting keeps its configurations)."""
     why = streamable(trial_path, options)
     if why is not None:
         raise ConfigError(f"cannot reconstruct piece by piece: {why}")
@@ -460,12 +463,12 @@ def reconstruct_streamed(
             subject = scaled_subject(head, static, ms, height_m, mass_kg, sex, warn)
             plan = plan_tracking(prep.names, subject, opts)
             result, tally, coverage = _track(
-                sp, prep, subject, plan, opts, rate, out, chunk_frames, progress
+                sp, prep, subject, plan, opts, rate, out, chunk_frames, progress, on_piece
             )
             for msg in coverage.warnings():
                 warn.add(msg)
             check_tracking(out.any_fitted, plan, warn)
-            written = _write(
+            written = [] if output is None else _write(
                 out, result, tuple(plan.names), rate, Path(output),
                 None if tracked_trc is None else Path(tracked_trc), progress,
             )  # fmt: skip
@@ -498,7 +501,7 @@ def _gap_warning(sp: _Spilled, prep: Preparation, chunk: int, rate: float, warn:
 def _track(
     sp: _Spilled, prep: Preparation, subject: Subject, plan: TrackingPlan,
     opts: ReconstructionOptions, rate: float, out: _Outputs, chunk: int,
-    progress: Progress | None,
+    progress: Progress | None, on_piece: Callable[[ReconstructionResult], None] | None = None,
 ) -> tuple[ReconstructionResult, MetricsTally, Coverage]:  # fmt: skip
     """Direct marker control piece by piece; returns the last piece's result (the
     columns' names and kinds for the files), the whole trial's figures and coverage."""
@@ -551,6 +554,8 @@ def _track(
         assert result.coverage is not None
         coverage = coverage.merge(result.coverage)
         out.add(result, rate)
+        if on_piece is not None:
+            on_piece(result)
         if progress is not None:
             progress("reconstruction", b, sp.n)
     assert result is not None

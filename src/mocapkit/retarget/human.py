@@ -58,17 +58,25 @@ class HumanMotion:
 
 def from_reconstruction(rec: object, segments: tuple[str, ...]) -> HumanMotion:
     """From :func:`mocapkit.reconstruct`'s result: forward kinematics of the scaled model."""
+    result = rec.result  # type: ignore[attr-defined]
+    return model_motion(rec.subject.human, result.time, result.q, segments)  # type: ignore[attr-defined]
+
+
+def model_motion(
+    human: Any, time: FloatArray, q: FloatArray, segments: tuple[str, ...], *,
+    ground: float | None = None,
+) -> HumanMotion:  # fmt: skip
+    """The scaled human model's segments over time (forward kinematics of ``q`` (N, nq));
+    ``ground``: as :func:`from_coordinates` (a piece of a longer reconstruction)."""
     import pinocchio as pin
 
-    human = rec.subject.human  # type: ignore[attr-defined]
-    result = rec.result  # type: ignore[attr-defined]
     model = human.bare_model if human.bare_model is not None else human.model
     data = model.createData()
     missing = [s for s in segments if not model.existFrame(s)]
     if missing:
         raise DataError(f"the human model has no segment(s) {', '.join(missing)}")
     ids = {s: model.getFrameId(s) for s in segments}
-    q_all = np.asarray(result.q, dtype=float)
+    q_all = np.asarray(q, dtype=float)
     n = q_all.shape[0]
     pos = {s: np.empty((n, 3)) for s in segments}
     rot = {s: np.empty((n, 3, 3)) for s in segments}
@@ -82,12 +90,13 @@ def from_reconstruction(rec: object, segments: tuple[str, ...]) -> HumanMotion:
     n_pos = {s: np.array(data.oMf[f].translation) for s, f in ids.items()}
     n_rot = {s: np.array(data.oMf[f].rotation) for s, f in ids.items()}
     return _on_the_ground(
-        np.asarray(result.time, dtype=float),
+        np.asarray(time, dtype=float),
         pos,
         {s: quat_from_matrix(r) for s, r in rot.items()},
         n_pos,
         {s: quat_from_matrix(r) for s, r in n_rot.items()},
         "markers",
+        ground,
     )
 
 

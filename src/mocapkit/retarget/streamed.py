@@ -1,8 +1,11 @@
-"""Retarget a joint-angle file (.mot/.sto) of any length in flat memory (issue 16).
+"""Retarget a recording of any length in flat memory (issue 16): joint angles (.mot/.sto),
+an OpenSense orientation table (through the streamed body model) or a marker trial
+(C3D/TRC, reconstructed piece by piece).
 
 The whole path (:func:`mocapkit.retarget.run.retarget`) holds the motion, its targets,
 the solution and the figures for every frame: ~4 KB a frame, 1.2 GB for an hour at 60 Hz.
-Here the file is read twice, ``PIECE_FRAMES`` rows at a time:
+Here the motion is gone through twice, ``PIECE_FRAMES`` frames at a time (a joint-angle
+file read again; a marker trial's configurations spilled to disk as they are tracked):
 
 1. **Scan.** What the whole path finds over the whole recording, kept as small arrays
    (time and the feet, ~60 B a frame): the ground under the feet, a treadmill belt's
@@ -14,23 +17,28 @@ Here the file is read twice, ``PIECE_FRAMES`` rows at a time:
    state across the seam (:meth:`FrameSolver.next_piece`), the figures summed
    (:class:`FigureTally`) and the trajectory written as it comes (:class:`TrajectoryWriter`).
 
-The result is the whole path's: the targets are equal to the last bit, and the robot's
-configurations differ only as much as two runs of the whole path do: the QP solver's sums
-depend on how its arrays fall in memory (~1e-8 rad), and a frame's second iteration is a
-threshold (``SETTLED_RAD``) such a difference can flip (then up to ~1e-3 rad, fading).
-Marker trials, BVH and IMU recordings are still retargeted whole.
+The result is the whole path's: without the collision guard, the same trajectory to the
+last bit (tests/retarget/test_streamed.py); with it (the default), the configurations
+differ only as much as two runs of the whole path already do, because the guard's
+near-contact decisions (hull tests, bisections) follow rounding that depends on where
+arrays fall in memory: median ~1e-5 rad, up to ~1e-3-1e-2 rad near a contact, fading.
+A marker trial longer than ``markers.streamed.HEAD_S`` is scaled from its start (as
+``markers reconstruct`` does); an orientation table is calibrated from its start (as
+``body angles`` does). BVH, qmt .mat files and x-IMU3 exports are still retargeted whole.
 """
 
 from __future__ import annotations
 
 import contextlib
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from mocapkit._spill import RowFile
 from mocapkit._validate import FloatArray
 from mocapkit.errors import DataError
 from mocapkit.io.joint_angles_mot import iter_joint_angles_mot
@@ -48,12 +56,13 @@ from mocapkit.retarget.targets import (
 
 PIECE_FRAMES = 5000
 ANGLE_SUFFIXES = (".mot", ".sto")
+MARKER_SUFFIXES = (".c3d", ".trc")
 
 
 def streamable(path: str | Path) -> bool:
-    """Whether ``path`` is retargeted piece by piece: a joint-angle file, or an OpenSense
-    orientation table (:func:`retarget_orientations_streamed`)."""
-    return Path(path).suffix.lower() in ANGLE_SUFFIXES
+    """Whether ``path`` is retargeted piece by piece: a joint-angle file, an OpenSense
+    orientation table or a marker trial (:func:`retarget_streamed`)."""
+    return Path(path).suffix.lower() in ANGLE_SUFFIXES + MARKER_SUFFIXES
 
 
 @dataclass
@@ -75,57 +84,83 @@ class _Scan:
 
     time: FloatArray
     ground: float
-    first_height: float | None
     belt: FloatArray
     contact: dict[str, np.ndarray]
     notes: list[str]
 
 
-def _coordinates(piece: Any) -> dict[str, FloatArray]:
-    return {n: piece.column(n) for n in piece.names}
+class _Angles:
+    """A joint-angle file's motion, read again for each pass, ``rows`` rows at a time."""
+
+    def __init__(
+        self, path: Path, segments: tuple[str, ...], rows: int, inertial: bool
+    ) -> None:  # fmt: skip
+        self.path, self.segments, self.rows, self.inertial = path, segments, rows, inertial
+        self.first_height: float | None = None
+        self.notes: list[str] = []
+
+    def pieces(self, ground: float) -> Iterator[HumanMotion]:
+        from mocapkit.retarget.run import INERTIAL_NOTE, no_translation_note
+
+        for k, piece in enumerate(iter_joint_angles_mot(self.path, self.rows)):
+            coords = {n: piece.column(n) for n in piece.names}
+            if k == 0:  # what the whole path takes from the first frame
+                self.notes = (
+                    [INERTIAL_NOTE]
+                    if self.inertial
+                    else no_translation_note(self.path.name, piece.names)
+                )
+                have = all(c in coords for c in ("pelvis_tx", "pelvis_ty", "pelvis_tz"))
+                self.first_height = float(coords["pelvis_ty"][0]) if have else None
+            yield from_coordinates(piece.time, coords, self.segments, ground=ground,
+                                   first_height=self.first_height)  # fmt: skip
 
 
-def _first_height(coords: dict[str, FloatArray]) -> float | None:
-    if all(c in coords for c in ("pelvis_tx", "pelvis_ty", "pelvis_tz")):
-        return float(coords["pelvis_ty"][0])
-    return None
+class _Model:
+    """A marker reconstruction's motion: the scaled model's configurations, spilled to
+    disk as they were tracked, through its forward kinematics ``rows`` frames at a time."""
+
+    def __init__(
+        self, human: Any, time: RowFile, q: RowFile, segments: tuple[str, ...], rows: int,
+        notes: list[str],
+    ) -> None:  # fmt: skip
+        self.human, self.time, self.q, self.segments = human, time, q, segments
+        self.rows, self.notes = rows, notes
+
+    def pieces(self, ground: float) -> Iterator[HumanMotion]:
+        from mocapkit.retarget.human import model_motion
+
+        n = self.time.rows
+        for a in range(0, n, self.rows):
+            b = min(n, a + self.rows)
+            yield model_motion(self.human, self.time.read(a, b), self.q.read(a, b),
+                               self.segments, ground=ground)  # fmt: skip
 
 
-def _scan(
-    path: Path, robot: Humanoid, segments: tuple[str, ...], rows: int, inertial: bool
-) -> _Scan:
-    from mocapkit.retarget.run import INERTIAL_NOTE, no_translation_note
-
+def _scan(source: _Angles | _Model, robot: Humanoid, segments: tuple[str, ...]) -> _Scan:
     feet = sorted({f.segment for f in robot.spec.feet})
     grounding = sorted(s for s in segments if s.startswith("foot"))
     times: list[FloatArray] = []
     pos: dict[str, list[FloatArray]] = {s: [] for s in sorted(set(feet) | set(grounding))}
-    first_height: float | None = None
-    notes: list[str] = []
-    for k, piece in enumerate(iter_joint_angles_mot(path, rows)):
-        coords = _coordinates(piece)
-        if k == 0:
-            first_height = _first_height(coords)
-            notes = [INERTIAL_NOTE] if inertial else no_translation_note(path.name, piece.names)
-        motion = from_coordinates(piece.time, coords, segments, ground=0.0,
-                                  first_height=first_height)  # fmt: skip
-        times.append(np.asarray(piece.time))
+    for motion in source.pieces(0.0):
+        times.append(np.asarray(motion.time))
         for s, parts in pos.items():
             parts.append(motion.pos[s])
     time = np.concatenate(times) if times else np.empty(0)
     if time.size == 0:
-        raise DataError(f"{path}: no rows of joint angles to retarget")
+        raise DataError(f"{getattr(source, 'path', 'the recording')}: no frames to retarget")
     whole = {s: np.concatenate(parts) for s, parts in pos.items()}
     ground = ground_height([whole[s] for s in grounding])
     empty: dict[str, FloatArray] = {}
     on_ground = HumanMotion(time, {s: p - [0.0, 0.0, ground] for s, p in whole.items()},
                             empty, empty, empty)  # fmt: skip
     belt = belt_velocity(on_ground, feet)
+    notes = list(source.notes)
     if belt.any():
         notes.append(treadmill_note(belt))
         on_ground = on_belt(on_ground, belt, float(time[0]))
     contact = {f: detect_contacts(on_ground, f) for f in feet}
-    return _Scan(time, ground, first_height, belt, contact, notes)
+    return _Scan(time, ground, belt, contact, notes)
 
 
 def retarget_streamed(
@@ -137,30 +172,117 @@ def retarget_streamed(
     avoid_collisions: bool = False,
     guard_collisions: bool = True,
     piece_frames: int = PIECE_FRAMES,
-    inertial: bool = False,
     preset: str = "full_body_15",
+    height_m: float | None = None,
 ) -> StreamedRetarget:
-    """``retarget(input_path, robot, ...)`` then ``write_trajectory(output, ...)`` for a
-    joint-angle file, in flat memory (module docstring); an orientation table goes to
-    :func:`retarget_orientations_streamed` (``preset``: its sensor tree). ``inertial``: the
-    angles come from an inertial recording (the notes say so, not that the file lacks
-    translation)."""
-    from mocapkit.retarget.metrics import FigureTally
-    from mocapkit.retarget.run import collision_guards, collision_notes, robot_and_segments
-    from mocapkit.retarget.solver import FrameSolver, Solution, finish, solve_piece
-    from mocapkit.retarget.trajectory_io import TrajectoryWriter
-
+    """``retarget(input_path, robot, ...)`` then ``write_trajectory(output, ...)`` in flat
+    memory (module docstring): a joint-angle file, an orientation table (through the body
+    model, ``preset`` its sensor tree) or a marker trial (reconstructed piece by piece,
+    ``height_m`` as ``retarget``'s)."""
     path = Path(input_path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such file or directory")
-    humanoid, segments = robot_and_segments(robot)
+    collisions = {"check_collisions": check_collisions, "avoid_collisions": avoid_collisions,
+                  "guard_collisions": guard_collisions}  # fmt: skip
+    if path.suffix.lower() in MARKER_SUFFIXES:
+        return _markers(path, robot, output, height_m, piece_frames, collisions)
     if table_is_quaternion(path):
-        return retarget_orientations_streamed(
-            path, robot, output, check_collisions=check_collisions,
-            avoid_collisions=avoid_collisions, guard_collisions=guard_collisions,
-            preset=preset, piece_frames=piece_frames,
-        )  # fmt: skip
-    scan = _scan(path, humanoid, segments, piece_frames, inertial)
+        return _orientations(path, robot, output, preset, piece_frames, collisions)
+    return _angles(path, robot, output, piece_frames, collisions)
+
+
+def _angles(
+    path: Path, robot: str | Path, output: str | Path | None, rows: int,
+    collisions: dict[str, bool], inertial: bool = False,
+) -> StreamedRetarget:  # fmt: skip
+    from mocapkit.retarget.run import robot_and_segments
+
+    humanoid, segments = robot_and_segments(robot)
+    return _retarget(_Angles(path, segments, rows, inertial), humanoid, segments, output,
+                     **collisions)  # fmt: skip
+
+
+def _orientations(
+    path: Path, robot: str | Path, output: str | Path | None, preset: str, rows: int,
+    collisions: dict[str, bool],
+) -> StreamedRetarget:  # fmt: skip
+    """An OpenSense orientation table (an inertial recording): the body model streams its
+    joint angles into a ``.mot`` on disk (:func:`mocapkit.body.streamed.stream_body`,
+    automatic calibration from the start of the recording, as ``body angles`` does),
+    which is then retargeted in pieces."""
+    import tempfile
+
+    from mocapkit.body.sensor_tree import SensorTree
+    from mocapkit.body.streamed import stream_body
+
+    with tempfile.TemporaryDirectory(dir=_beside(output), prefix=".mocapkit-retarget-") as d:
+        angles = Path(d) / f"{path.stem}.mot"
+        stream_body(SensorTree.preset(preset), path, output=angles, calibration="auto",
+                    heading_alignment="shared", rows=rows)  # fmt: skip
+        return _angles(angles, robot, output, rows, collisions, inertial=True)
+
+
+def _markers(
+    path: Path, robot: str | Path, output: str | Path | None, height_m: float | None,
+    rows: int, collisions: dict[str, bool],
+) -> StreamedRetarget:  # fmt: skip
+    """A marker trial: reconstructed piece by piece as ``markers reconstruct`` does
+    (:func:`mocapkit.markers.streamed.reconstruct_streamed`, the options ``retarget``
+    uses), the configurations spilled to disk, then retargeted in pieces through the
+    scaled model."""
+    import tempfile
+
+    from mocapkit._logged import logged_warnings
+    from mocapkit.markers.reconstruct import ReconstructionOptions
+    from mocapkit.markers.streamed import reconstruct_streamed
+    from mocapkit.retarget.run import robot_and_segments
+
+    humanoid, segments = robot_and_segments(robot)
+    with tempfile.TemporaryDirectory(dir=_beside(output), prefix=".mocapkit-retarget-") as d:
+        time = RowFile(Path(d) / "time.raw")
+        spill: list[RowFile] = []
+
+        def keep(result: Any) -> None:
+            if not spill:
+                spill.append(RowFile(Path(d) / "q.raw", (result.q.shape[1],)))
+            time.append(result.time)
+            spill[0].append(result.q)
+
+        try:
+            with logged_warnings() as warned:  # as the whole path's reconstruct() has them
+                done = reconstruct_streamed(path, None, None, height_m, None,
+                                            ReconstructionOptions(), None, on_piece=keep,
+                                            chunk_frames=rows)  # fmt: skip
+            source = _Model(done.subject.human, time, spill[0], segments, rows, warned)
+            return _retarget(source, humanoid, segments, output, **collisions)
+        finally:
+            time.close()
+            for f in spill:
+                f.close()
+
+
+def _beside(output: str | Path | None) -> Path | None:
+    """Where temporary files go: beside the output (its disk), else the system's."""
+    return Path(output).resolve().parent if output is not None else None
+
+
+def _retarget(
+    source: _Angles | _Model,
+    humanoid: Humanoid,
+    segments: tuple[str, ...],
+    output: str | Path | None,
+    *,
+    check_collisions: bool,
+    avoid_collisions: bool,
+    guard_collisions: bool,
+) -> StreamedRetarget:
+    """The two passes over ``source`` (module docstring)."""
+    from mocapkit.retarget.metrics import FigureTally
+    from mocapkit.retarget.run import collision_guards, collision_notes
+    from mocapkit.retarget.solver import FrameSolver, Solution, finish, solve_piece
+    from mocapkit.retarget.trajectory_io import TrajectoryWriter
+
+    scan = _scan(source, humanoid, segments)
     coll, avoid = collision_guards(humanoid, check_collisions, avoid_collisions,
                                    guard_collisions)  # fmt: skip
     tally = FigureTally(humanoid, coll)
@@ -169,15 +291,13 @@ def retarget_streamed(
     seconds = 0.0
     a = 0
     belt = (scan.belt, float(scan.time[0]))
+    what = getattr(source, "path", "the recording")
     writer = TrajectoryWriter(output, humanoid) if output is not None else None
     with writer if writer is not None else contextlib.nullcontext():
-        for piece in iter_joint_angles_mot(path, piece_frames):
-            b = a + piece.time.size
-            if b > scan.time.size or not np.array_equal(piece.time, scan.time[a:b]):
-                raise DataError(f"{path} changed while it was being retargeted (at row {a})")
-            coords = _coordinates(piece)
-            motion = from_coordinates(piece.time, coords, segments, ground=scan.ground,
-                                      first_height=scan.first_height)  # fmt: skip
+        for motion in source.pieces(scan.ground):
+            b = a + motion.n_frames
+            if b > scan.time.size or not np.array_equal(motion.time, scan.time[a:b]):
+                raise DataError(f"{what} changed while it was being retargeted (at row {a})")
             contact = {f: c[a:b] for f, c in scan.contact.items()}
             with warnings.catch_warnings():
                 warnings.simplefilter("error", RetargetWarning)  # none expected here
@@ -195,7 +315,7 @@ def retarget_streamed(
                 writer.write(sol, targets)
             a = b
     if solver is None or a != scan.time.size:
-        raise DataError(f"{path} changed while it was being retargeted ({a} rows read back)")
+        raise DataError(f"{what} changed while it was being retargeted ({a} rows read back)")
     summary = Solution(np.empty(0), np.empty((0, humanoid.model.nq)), {}, {})
     finish(solver, summary)
     figures = tally.figures(len(summary.held_frames))
@@ -203,35 +323,3 @@ def retarget_streamed(
     notes += collision_notes(coll, figures, a, guard_collisions)
     return StreamedRetarget(humanoid, a, seconds, figures, notes, len(summary.kept_apart),
                             len(summary.stopped))  # fmt: skip
-
-
-def retarget_orientations_streamed(
-    path: str | Path,
-    robot: str | Path,
-    output: str | Path | None = None,
-    *,
-    preset: str = "full_body_15",
-    piece_frames: int = PIECE_FRAMES,
-    check_collisions: bool = True,
-    avoid_collisions: bool = False,
-    guard_collisions: bool = True,
-) -> StreamedRetarget:
-    """An OpenSense orientation table (an inertial recording) onto ``robot`` in flat
-    memory: the body model streams its joint angles into a ``.mot`` on disk
-    (:func:`mocapkit.body.streamed.stream_body`, automatic calibration from the start of
-    the recording, as ``body angles`` does), which is then retargeted in pieces."""
-    import tempfile
-
-    from mocapkit.body.sensor_tree import SensorTree
-    from mocapkit.body.streamed import stream_body
-
-    out_dir = Path(output).parent if output is not None else None
-    with tempfile.TemporaryDirectory(dir=out_dir, prefix=".mocapkit-retarget-") as d:
-        angles = Path(d) / f"{Path(path).stem}.mot"
-        stream_body(SensorTree.preset(preset), path, output=angles, calibration="auto",
-                    heading_alignment="shared", rows=piece_frames)  # fmt: skip
-        return retarget_streamed(
-            angles, robot, output, check_collisions=check_collisions,
-            avoid_collisions=avoid_collisions, guard_collisions=guard_collisions,
-            piece_frames=piece_frames, inertial=True,
-        )  # fmt: skip
