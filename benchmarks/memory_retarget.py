@@ -1,11 +1,14 @@
 """Time and peak memory of ``mocapkit retarget`` against recording length (issue 16).
 
-    python -m benchmarks.memory_retarget [--minutes 1 10 60] [--robot g1] [--write-docs]
+    python -m benchmarks.memory_retarget [--minutes 1 10 60] [--robot g1] [--source mot|trc]
+        [--write-docs]
 
 OpenSim's gait2392 walk (``subject01_walk1.trc`` in ../shared), reconstructed once by
 ``mocapkit markers reconstruct`` into joint angles, is played forwards then backwards to
 the length asked for (continuous) and written as a .mot; ``mocapkit retarget WALK.mot
 --robot g1 -o OUT.csv`` (collision guard on, as by default) runs on it as a whole process.
+``--source trc``: the TRC itself played to the length (``benchmarks.memory_markers``), so
+the command reconstructs and retargets it.
 Reported: wall time and the child's peak resident memory. Target (issue 16): within 2x
 from 1 min to 1 h.
 """
@@ -20,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.memory_markers import long_trial
 from benchmarks.memory_vs_length import length_report, measure
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -45,6 +49,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, nargs="+", default=[1.0, 10.0, 60.0])
     parser.add_argument("--robot", default="g1")
+    parser.add_argument("--source", choices=["mot", "trc"], default="mot")
     parser.add_argument("--write-docs", action="store_true")
     args = parser.parse_args()
     if not TRC.exists():
@@ -55,21 +60,35 @@ def main() -> None:
         subprocess.run([*CLI, "markers", "reconstruct", str(TRC), "--height-m", "1.80",
                         "-o", str(walk)], check=True, capture_output=True)  # fmt: skip
         for minutes in args.minutes:
-            src = Path(d) / f"walk_{minutes:g}min.mot"
-            frames = long_angles(walk, src, minutes)
-            m = measure([*CLI, "retarget", str(src), "--robot", args.robot,
+            src = Path(d) / f"walk_{minutes:g}min.{args.source}"
+            frames = (long_angles(walk, src, minutes) if args.source == "mot"
+                      else long_trial(src, minutes))  # fmt: skip
+            height = ["--height", "1.80"] if args.source == "trc" else []
+            m = measure([*CLI, "retarget", str(src), "--robot", args.robot, *height,
                          "-o", str(Path(d) / "out.csv")])  # fmt: skip
             rows.append((minutes, frames, m))
             print(minutes, frames, m, flush=True)
             src.unlink()
     lengths = " ".join(f"{x:g}" for x in args.minutes)
-    length_report(
-        rows, f"python -m benchmarks.memory_retarget --minutes {lengths} --robot {args.robot}",
-        "OpenSim's gait2392 walk reconstructed by mocapkit, its joint angles played forwards "
-        "and backwards to the length at 60 Hz; `mocapkit retarget WALK.mot --robot "
-        f"{args.robot} -o OUT.csv`, collision guard on, whole processes",
-        "Memory and time against recording length: retarget", args.write_docs,
-    )  # fmt: skip
+    command = f"python -m benchmarks.memory_retarget --minutes {lengths} --robot {args.robot}"
+    if args.source == "mot":
+        length_report(
+            rows, command,
+            "OpenSim's gait2392 walk reconstructed by mocapkit, its joint angles played "
+            "forwards and backwards to the length at 60 Hz; `mocapkit retarget WALK.mot "
+            f"--robot {args.robot} -o OUT.csv`, collision guard on, whole processes",
+            "Memory and time against recording length: retarget", args.write_docs,
+        )  # fmt: skip
+    else:
+        length_report(
+            rows, f"{command} --source trc",
+            "OpenSim's gait2392 walk TRC played forwards and backwards to the length at "
+            f"60 Hz (`benchmarks.memory_markers`); `mocapkit retarget WALK.trc --robot "
+            f"{args.robot} --height 1.80 -o OUT.csv` (reconstructed, then retargeted), "
+            "collision guard on, whole processes",
+            "Memory and time against recording length: retarget from markers",
+            args.write_docs,
+        )  # fmt: skip
 
 
 if __name__ == "__main__":
