@@ -165,7 +165,8 @@ def body_angles(
             orientations.
         calibration: ``"auto"`` (from a still pose and the motion) or a held pose name.
         heading_alignment: None: ``"joints"`` with a 6D filter (each sensor's heading
-            kept consistent through the joints), else ``"shared"``.
+            kept consistent through the joints), else ``"hinges"`` (one world heading,
+            each segment aligned at the pose: ``body.functional.calibrate_functional``).
         start_s, end_s: crop [s]. dropout: ``"nan"`` or ``"hold"`` a missing sensor.
 
     Example:

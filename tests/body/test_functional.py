@@ -185,5 +185,12 @@ def test_hinges_only_across_worlds_that_agree() -> None:
     res, _ = body_angles(tree, joints, same)
     for c in tree.coordinate_names:
         np.testing.assert_allclose(res.angles.column(c), coords[c], atol=1e-6, err_msg=c)
-    with pytest.raises(ConfigError, match="expected 'shared', 'pose' or 'joints', got 'x'"):
+    # the default on worlds that share a heading (9D): hinges, then the pose's alignment
+    hinges = calibrate_functional(tree, same, (0.0, 0.9))
+    assert hinges.diagnostics["heading_alignment"] == "hinges"
+    assert hinges.segments["tibia_r"].diagnostics["hinge"] == 1.0
+    res, _ = body_angles(tree, hinges, same)
+    for c in tree.coordinate_names:
+        np.testing.assert_allclose(res.angles.column(c), coords[c], atol=1e-6, err_msg=c)
+    with pytest.raises(ConfigError, match="expected one of hinges, shared, pose, joints, got 'x'"):
         calibrate_functional(tree, same, (0.0, 0.9), heading_alignment="x")

@@ -196,7 +196,8 @@ def test_ximu3_with_our_own_filter_agrees_with_the_devices(ximu3: BodyResult) ->
 def test_body_angles_6d_aligns_headings_from_the_pose(shared_data):
     """With a 6D filter each sensor has its own heading: the CLI's automatic calibration
     aligns them from the pose, and keeps them aligned through the joints ("joints"),
-    unless told otherwise (the shared option is wrong there)."""
+    unless told otherwise (the shared option is wrong there); 9D aligns them at the pose
+    after comparing the hinges across the joints ("hinges")."""
     import json
     import subprocess
     import sys
@@ -204,7 +205,7 @@ def test_body_angles_6d_aligns_headings_from_the_pose(shared_data):
     rec = shared_data / "ximu3-lower-body"
     base = [sys.executable, "-m", "mocapkit", "body", "angles", str(rec), "--preset",
             "lower_body", "--filter", "polaris-body", "--json"]  # fmt: skip
-    for mode, expected in (("6d", "joints"), ("9d", "shared")):
+    for mode, expected in (("6d", "joints"), ("9d", "hinges")):
         p = subprocess.run([*base, "--mode", mode], capture_output=True, text=True, check=False)
         assert p.returncode == 0, p.stderr
         assert json.loads(p.stdout)["calibration"]["heading_alignment"] == expected

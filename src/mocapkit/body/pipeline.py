@@ -67,7 +67,7 @@ def calibrate(
     calibration: str = "auto",
     window: tuple[float, float] | None = None,
     heading: HeadingFixed | HeadingFromSensor | None = None,
-    heading_alignment: str = "shared",
+    heading_alignment: str = "hinges",
     root_reference: str = "body",
     still_duration_s: float = 1.0,
 ) -> BodyCalibration:
@@ -111,11 +111,11 @@ def placement_source(
 
 def default_heading_alignment(filter_name: str | None, mode: str) -> str:
     """6D raw samples through a filter: each sensor's heading is its own, kept consistent
-    by the joints (``"joints"``). 9D and a device's orientations: one shared heading
-    (joints would also take out the few degrees between 9D sensors in the closed loop,
-    but on the x-IMU3 recording they move the hips 14 deg from what two 9D filters agree
-    on)."""
-    return "joints" if (filter_name and mode == "6d") else "shared"
+    by the joints (``"joints"``). 9D and a device's orientations: one world heading, the
+    hinges compared across the joints and each segment aligned at the pose (``"hinges"``,
+    :func:`mocapkit.body.functional.calibrate_functional`; the joint-heading pass itself
+    would move the x-IMU3 recording's hips 14 deg from what two 9D filters agree on)."""
+    return "joints" if (filter_name and mode == "6d") else "hinges"
 
 
 def run_body(

@@ -312,12 +312,15 @@ def register(subparsers: Any) -> None:
     )
     a.add_argument(
         "--heading-alignment",
-        choices=("shared", "pose", "joints"),
+        choices=("hinges", "shared", "pose", "joints"),
         default=None,
-        help="how the sensors' headings are aligned: shared (one world heading: 9D, device "
-        "orientations), pose (each sensor's own, aligned at the held pose) or joints (aligned "
-        "at the pose and kept aligned by the joints' accelerations: 6D drift taken out; "
-        "needs --filter); default joints with --filter ... --mode 6d, else shared",
+        help="how the sensors' headings are aligned: hinges (one world heading, 9D or device "
+        "orientations: knees, elbows and ankles compared across the joint, each segment "
+        "then aligned at the held pose), shared (one world heading, each segment headed by "
+        "its own functional axis), pose (each sensor's own heading, aligned at the held "
+        "pose) or joints (aligned at the pose and kept aligned by the joints' "
+        "accelerations: 6D drift taken out; needs --filter); default joints with --filter "
+        "... --mode 6d, else hinges",
     )
     a.add_argument(
         "--root-reference",

@@ -108,7 +108,7 @@ def load_human(
 
     oris = load_orientations(path)
     # qmt files have no magnetometer: their sensors' headings are each their own
-    align = "pose" if path.suffix.lower() == ".mat" else "shared"
+    align = "pose" if path.suffix.lower() == ".mat" else "hinges"
     res = run_body(SensorTree.preset(preset), oris, calibration="auto", heading_alignment=align)
     a = res.body.angles
     coords = {n: a.column(n) for n in a.names}

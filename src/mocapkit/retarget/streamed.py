@@ -218,7 +218,7 @@ def _orientations(
     with tempfile.TemporaryDirectory(dir=_beside(output), prefix=".mocapkit-retarget-") as d:
         angles = Path(d) / f"{path.stem}.mot"
         stream_body(SensorTree.preset(preset), path, output=angles, calibration="auto",
-                    heading_alignment="shared", rows=rows)  # fmt: skip
+                    heading_alignment="hinges", rows=rows)  # fmt: skip
         return _angles(angles, robot, output, rows, collisions, inertial=True)
 
 
