@@ -57,8 +57,9 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory() as d:
         walk = Path(d) / "walk.mot"
-        subprocess.run([*CLI, "markers", "reconstruct", str(TRC), "--height-m", "1.80",
-                        "-o", str(walk)], check=True, capture_output=True)  # fmt: skip
+        if args.source == "mot":  # the angles come from our own reconstruction
+            subprocess.run([*CLI, "markers", "reconstruct", str(TRC), "--height-m", "1.80",
+                            "-o", str(walk)], check=True, capture_output=True)  # fmt: skip
         for minutes in args.minutes:
             src = Path(d) / f"walk_{minutes:g}min.{args.source}"
             frames = (long_angles(walk, src, minutes) if args.source == "mot"

@@ -45,6 +45,7 @@ from mocapkit.io.joint_angles_mot import iter_joint_angles_mot
 from mocapkit.io.opensim_table import table_is_quaternion
 from mocapkit.retarget.human import HumanMotion, from_coordinates, ground_height
 from mocapkit.retarget.robot_model import Humanoid
+from mocapkit.retarget.run import ANGLE_SUFFIXES, MARKER_SUFFIXES
 from mocapkit.retarget.targets import (
     RetargetWarning,
     belt_velocity,
@@ -55,8 +56,6 @@ from mocapkit.retarget.targets import (
 )
 
 PIECE_FRAMES = 5000
-ANGLE_SUFFIXES = (".mot", ".sto")
-MARKER_SUFFIXES = (".c3d", ".trc")
 
 
 def streamable(path: str | Path) -> bool:
@@ -96,6 +95,7 @@ class _Angles:
         self, path: Path, segments: tuple[str, ...], rows: int, inertial: bool
     ) -> None:  # fmt: skip
         self.path, self.segments, self.rows, self.inertial = path, segments, rows, inertial
+        self.name = str(path)  # what messages call the recording
         self.first_height: float | None = None
         self.notes: list[str] = []
 
@@ -122,10 +122,10 @@ class _Model:
 
     def __init__(
         self, human: Any, time: RowFile, q: RowFile, segments: tuple[str, ...], rows: int,
-        notes: list[str],
+        notes: list[str], name: str,
     ) -> None:  # fmt: skip
         self.human, self.time, self.q, self.segments = human, time, q, segments
-        self.rows, self.notes = rows, notes
+        self.rows, self.notes, self.name = rows, notes, name
 
     def pieces(self, ground: float) -> Iterator[HumanMotion]:
         from mocapkit.retarget.human import model_motion
@@ -148,7 +148,7 @@ def _scan(source: _Angles | _Model, robot: Humanoid, segments: tuple[str, ...]) 
             parts.append(motion.pos[s])
     time = np.concatenate(times) if times else np.empty(0)
     if time.size == 0:
-        raise DataError(f"{getattr(source, 'path', 'the recording')}: no frames to retarget")
+        raise DataError(f"{source.name}: no frames to retarget")
     whole = {s: np.concatenate(parts) for s, parts in pos.items()}
     ground = ground_height([whole[s] for s in grounding])
     empty: dict[str, FloatArray] = {}
@@ -253,7 +253,8 @@ def _markers(
                 done = reconstruct_streamed(path, None, None, height_m, None,
                                             ReconstructionOptions(), None, on_piece=keep,
                                             chunk_frames=rows)  # fmt: skip
-            source = _Model(done.subject.human, time, spill[0], segments, rows, warned)
+            source = _Model(done.subject.human, time, spill[0], segments, rows, warned,
+                            str(path))  # fmt: skip
             return _retarget(source, humanoid, segments, output, **collisions)
         finally:
             time.close()
@@ -291,7 +292,7 @@ def _retarget(
     seconds = 0.0
     a = 0
     belt = (scan.belt, float(scan.time[0]))
-    what = getattr(source, "path", "the recording")
+    what = source.name
     writer = TrajectoryWriter(output, humanoid) if output is not None else None
     with writer if writer is not None else contextlib.nullcontext():
         for motion in source.pieces(scan.ground):
