@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
+from mocapkit.body import functional
 from mocapkit.body.calibration import CalibrationError, HeadingFixed, pose_coordinates
-from mocapkit.body.functional import calibrate_functional, dominant_axis
+from mocapkit.body.functional import calibrate_functional
+from mocapkit.body.hinge_fit import dominant_axis
 from mocapkit.body.kinematics import body_angles
 from mocapkit.body.sensor_tree import SensorTree
 from mocapkit.errors import ConfigError
-from mocapkit.geometry import quat_angle_between
+from mocapkit.geometry import quat_angle_between, quat_rotate
 from tests.body.synth import gait_like, random_mountings, sensor_orientations
 
 
@@ -123,6 +127,59 @@ def test_full_body_gait_like_motion_within_degrees() -> None:
     for c in tree.coordinate_names:
         rms = float(np.sqrt(np.mean((res.angles.column(c) - coords[c]) ** 2)))
         assert rms < np.deg2rad(0.25), (c, np.rad2deg(rms))
+
+
+def test_forearm_twist_axis_takes_the_held_pose_tilt_out(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A pose held off (the upper arm 6 deg forward, the elbow 4 deg bent) tilts every
+    pose-calibrated mounting of the arm. The forearm turns far about its own long axis
+    afterwards (pronation), so a tilt fixed in it crosses into the elbow's flexion by as
+    much as it turned: the elbow's error swings with the pronation. Its twist axis (the
+    elbow's second axis, from the two-axis fit) lays the tilt exactly: the elbow then
+    reads a constant offset (the upper arm's, which only the pose defines), and the hand,
+    held as the forearm was, is turned with it (the wrist stays exact)."""
+    tree = SensorTree.preset("full_body_15")
+    t = np.arange(1000) / 100.0
+    coords = gait_like(tree, t, 1.0, pose_coordinates(tree, "npose"), seed=2)
+    coords["pro_sup_r"] = coords["pro_sup_r"] - 0.8 * (
+        1.0 - np.cos(1.4 * np.pi * np.maximum(t - 1.0, 0.0))
+    )
+    held = np.clip((1.5 - t) / 0.5, 0.0, 1.0)
+    coords["arm_flex_r"] = coords["arm_flex_r"] + np.deg2rad(6.0) * held
+    coords["elbow_flex_r"] = coords["elbow_flex_r"] + np.deg2rad(4.0) * held
+    mounts = random_mountings(tree, np.random.default_rng(3))
+    ori = sensor_orientations(tree, t, coords, mounts, heading_rad=0.7)
+    plain = SensorTree(tree.name, tuple(replace(s, functional="none") if s.functional == "twist"
+                                        else s for s in tree.segments))  # fmt: skip
+    i = tree.segment_names.index("radius_r")
+    axis = tree.segments[i].joint.second_axis_in_child()
+    assert axis is not None
+    moving = t > 2.0
+    found = {}
+    for which, tr in (("twist", tree), ("pose", plain)):
+        cal = calibrate_functional(tr, ori, (0.0, 0.9))
+        mount = cal.segments["radius_r"].q_sensor_segment
+        tilt = np.rad2deg(np.arccos(min(1.0, abs(float(
+            quat_rotate(mount, axis) @ quat_rotate(mounts[i], axis))))))  # fmt: skip
+        res, _ = body_angles(tr, cal, ori)
+        err = {c: np.rad2deg(res.angles.column(c)[moving] - coords[c][moving])
+               for c in ("elbow_flex_r", "wrist_flex_r", "wrist_dev_r")}  # fmt: skip
+        found[which] = (tilt, err, cal.segments["radius_r"].diagnostics)
+    tilt, err, diag = found["twist"]
+    assert tilt < 0.05
+    assert diag["functional"] == 1.0
+    assert 5.0 < diag["twist_correction_deg"] < 15.0
+    assert np.std(err["elbow_flex_r"]) < 0.1  # constant: the upper arm's pose offset
+    assert abs(np.mean(err["elbow_flex_r"]) - 6.0) < 0.5
+    for c in ("wrist_flex_r", "wrist_dev_r"):
+        assert np.sqrt(np.mean(err[c] ** 2)) < 0.1, c
+    tilt, err, diag = found["pose"]
+    assert tilt > 5.0
+    assert np.std(err["elbow_flex_r"]) > 2.0  # swings with the pronation
+    # a correction larger than a held pose's error says the fit missed: the pose stays
+    monkeypatch.setattr(functional, "MAX_TWIST_CORRECTION_DEG", 5.0)
+    kept = calibrate_functional(tree, ori, (0.0, 0.9)).segments["radius_r"]
+    assert kept.diagnostics["functional"] == 0.0
+    assert kept.diagnostics["twist_correction_deg"] > 5.0
 
 
 def test_no_motion_is_refused() -> None:

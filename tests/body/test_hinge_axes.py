@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mocapkit.body.calibration import angular_rate
-from mocapkit.body.functional import hinge_axes
+from mocapkit.body.hinge_fit import hinge_axes
 from mocapkit.geometry import quat_from_axis_angle, quat_mul, quat_rotate
 from mocapkit.series import OrientationSeries
 

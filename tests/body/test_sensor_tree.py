@@ -126,8 +126,11 @@ def test_tree_validation() -> None:
         SensorTree("t", (SegmentSpec("a", "ground", "s1", j), SegmentSpec("b", "a", "s2", j)))
     with pytest.raises(ConfigError, match="segment name 'a' used twice"):
         SensorTree("t", (SegmentSpec("a", "ground", "s1", j), SegmentSpec("a", "a", "s2", k)))
-    with pytest.raises(ConfigError, match="functional must be 'flexion' or 'none'"):
+    with pytest.raises(ConfigError, match="functional must be one of flexion, twist, none"):
         SegmentSpec("a", "ground", "s1", j, functional="maybe")
+    # a twist is the second axis of a two-coordinate joint (j reports three)
+    with pytest.raises(ConfigError, match="functional 'twist' needs a joint with two"):
+        SegmentSpec("a", "ground", "s1", j, functional="twist")
     with pytest.raises(ConfigError, match="'segments' must be a non-empty list"):
         SensorTree.from_dict({"name": "x"})
 

@@ -169,6 +169,17 @@ class JointSpec:
         q.setflags(write=False)
         return q
 
+    def second_axis_in_child(self) -> FloatArray | None:
+        """(3,) the axis of a two-coordinate joint's second rotation in the child segment's
+        frame, where it is fixed (the forearm's pronation after the elbow's flexion, the
+        subtalar joint after the ankle): the decomposition's last axis, when the middle
+        angle is the unreported one; None otherwise. Its sign is arbitrary."""
+        o = self.order
+        assert o is not None
+        if self.coordinates[o[1]] is not None or self.coordinates[o[2]] is None:
+            return None
+        return np.asarray(self.decomposition_frame[:, 2])
+
     def slots(self) -> tuple[tuple[int, int, int], FloatArray, FloatArray]:
         """Per XYZ angle of ``F``: the coordinate index (into :attr:`coordinates`), its sign
         and its offset: ``coordinate[slot_coord[j]] = sign[j] * angle[j] + offset[j]``."""
@@ -185,6 +196,10 @@ class JointSpec:
         return (o[0], o[1], o[2]), sign, offset
 
 
+#: how automatic calibration may find a segment's axes (SegmentSpec.functional)
+FUNCTIONAL_KINDS = ("flexion", "twist", "none")
+
+
 @dataclass(frozen=True)
 class SegmentSpec:
     """One body segment carrying one sensor.
@@ -198,7 +213,9 @@ class SegmentSpec:
             (skeleton drawing and BVH only).
         end: (3,) [m] the segment's far end in its own frame (BVH end site of a leaf).
         functional: how automatic calibration may find this segment's z (flexion) axis:
-            ``"flexion"`` (dominant rotation axis in motion) or ``"none"``.
+            ``"flexion"`` (dominant rotation axis in motion), ``"twist"`` (calibrated from
+            the pose, its tilt then corrected by the second axis of its own joint, fixed in
+            it and found from the motion: the forearm's pronation axis) or ``"none"``.
     """
 
     name: str
@@ -220,10 +237,16 @@ class SegmentSpec:
         end.setflags(write=False)
         object.__setattr__(self, "offset", offset)
         object.__setattr__(self, "end", end)
-        if self.functional not in ("flexion", "none"):
+        if self.functional not in FUNCTIONAL_KINDS:
             raise ConfigError(
-                f"segment {self.name!r}: functional must be 'flexion' or 'none', "
-                f"got {self.functional!r}"
+                f"segment {self.name!r}: functional must be one of "
+                f"{', '.join(FUNCTIONAL_KINDS)}, got {self.functional!r}"
+            )
+        if self.functional == "twist" and self.joint.second_axis_in_child() is None:
+            raise ConfigError(
+                f"segment {self.name!r}: functional 'twist' needs a joint with two "
+                f"coordinates, the second fixed in the segment (an elbow's flexion and "
+                f"pronation); joint {self.joint.name!r} reports {self.joint.coordinates}"
             )
 
 
