@@ -50,6 +50,7 @@ MODULES = (
     "mocapkit.body.identify",
     "mocapkit.markers.reconstruct",
     "mocapkit.markers.streamed",
+    "mocapkit.markers.streamed_cleaning",
     "mocapkit.retarget.robot_spec",
     "mocapkit.retarget.run",
     "mocapkit.retarget.streamed",

@@ -207,22 +207,31 @@ def prepare(
     _, trial, static = plan_preparation(trial, static, ms, options, warnings)
     if options.start_s is not None or options.end_s is not None:
         trial = trial.between(options.start_s, options.end_s)
-    clusters = {
+    trial, report = fill_gaps(trial, options.fill_gaps, options.max_gap_s, marker_clusters(ms))
+    if options.lowpass_hz:
+        trial, report = lowpass(trial, options.lowpass_hz, report=report)
+    warn_open_gaps(report, trial.n_frames, trial.rate_hz, warnings)
+    return trial, static, report
+
+
+def marker_clusters(ms: MarkerSet) -> dict[str, list[str]]:
+    """Marker -> the other markers of its segment (the rigid-cluster gap fill's donors)."""
+    return {
         m.name: [o.name for o in ms.markers if o.segment == m.segment and o.name != m.name]
         for m in ms.markers
     }
-    trial, report = fill_gaps(trial, options.fill_gaps, options.max_gap_s, clusters)
-    if options.lowpass_hz:
-        trial, report = lowpass(trial, options.lowpass_hz, report=report)
-    long_gaps = [g for g in report.left_open if g.start > 0 and g.stop < trial.n_frames]
+
+
+def warn_open_gaps(report: CleaningReport, n: int, rate: float, warnings: _Warnings) -> None:
+    """The interior gaps cleaning left open, with the longest, as one warning."""
+    long_gaps = [g for g in report.left_open if g.start > 0 and g.stop < n]
     if long_gaps:
         worst = max(long_gaps, key=lambda g: g.length)
         warnings.add(
             f"{len(long_gaps)} gaps are not filled (longest: {worst.marker}, frames "
-            f"{worst.start}-{worst.stop - 1}, {worst.length / trial.rate_hz:.2f} s); those markers "
+            f"{worst.start}-{worst.stop - 1}, {worst.length / rate:.2f} s); those markers "
             "are left out of those frames (--fill-gaps and --max-gap-s fill short gaps)"
         )
-    return trial, static, report
 
 
 def _initial_pose(

@@ -19,9 +19,10 @@ written piece by piece (issue 16).
 Equal to the whole-trial path (:func:`mocapkit.markers.reconstruct.run`) to rounding
 (tests/markers/test_streamed.py), except that on trials longer than :data:`HEAD_S` the
 decisions above rest on its first :data:`HEAD_S` seconds, and the conditioning figures
-sample each visibility pattern per piece. Options that look at the whole trial at once
-(gap filling and low-pass filtering, IK, online mode, the reference backend) take the
-whole-trial path (:func:`streamable` says why).
+sample each visibility pattern per piece. Gap filling and low-pass filtering run on a
+prepared copy of the frames on disk (:mod:`mocapkit.markers.streamed_cleaning`). IK,
+online mode and the reference backend take the whole-trial path (:func:`streamable`
+says why).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ import logging
 import tempfile
 import time as _time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +44,7 @@ from mocapkit.body.markersets import load_markerset
 from mocapkit.body.scaling import Subject
 from mocapkit.errors import ConfigError, DataError
 from mocapkit.markers.cleaning import _runs
+from mocapkit.markers.conventions import UnitCheck
 from mocapkit.markers.coverage import Coverage, MetricsTally
 from mocapkit.markers.osc import OfflineTracker, target_derivatives
 from mocapkit.markers.reconstruct import (
@@ -57,8 +59,10 @@ from mocapkit.markers.reconstruct import (
     check_tracking,
     choose_markerset,
     load_markers,
+    marker_clusters,
     plan_preparation,
     plan_tracking,
+    warn_open_gaps,
 )
 from mocapkit.markers.result import (
     ReconstructionResult,
@@ -66,6 +70,7 @@ from mocapkit.markers.result import (
     output_columns,
     write_csv_rows,
 )
+from mocapkit.markers.streamed_cleaning import fill_gaps_spilled, lowpass_spilled
 from mocapkit.markers.subject import check_static_is_not_trial, scaled_subject
 from mocapkit.markers.trajectories import MarkerTrajectories, check_whole_rows
 
@@ -85,8 +90,6 @@ def streamable(trial_path: str | Path, options: ReconstructionOptions) -> str | 
         return f"--method {options.method} --mode {options.mode} runs on the whole trial"
     if options.osc.backend != "fast":
         return "the reference backend runs on the whole trial"
-    if options.fill_gaps != "none" or options.lowpass_hz:
-        return "gap filling and low-pass filtering see the whole trial"
     return None
 
 
@@ -457,9 +460,13 @@ def reconstruct_streamed(
             if ik_setup is not None:
                 ms, opts = apply_ik_setup(ms, opts, ik_setup, warn)
             prep, _, static = plan_preparation(sp.head_raw, static, ms, opts, warn, ever=sp.ever)
+            rate = prep.apply(sp.head).rate_hz
+            if opts.fill_gaps != "none" or opts.lowpass_hz:
+                sp, prep = _cleaned(sp, prep, ms, opts, rate, Path(d), chunk_frames, progress,
+                                    warn)  # fmt: skip
+            else:
+                _gap_warning(sp, prep, chunk_frames, rate, warn)
             head = prep.apply(sp.head)
-            rate = head.rate_hz
-            _gap_warning(sp, prep, chunk_frames, rate, warn)
             subject = scaled_subject(head, static, ms, height_m, mass_kg, sex, warn)
             plan = plan_tracking(prep.names, subject, opts)
             result, tally, coverage = _track(
@@ -484,6 +491,43 @@ def reconstruct_streamed(
             out.close()
             sp.close()
     return StreamedReconstruction(tally.metrics(), list(warn), subject, written)
+
+
+def _cleaned(
+    sp: _Spilled, prep: Preparation, ms: Any, opts: ReconstructionOptions, rate: float,
+    directory: Path, chunk: int, progress: Progress | None, warn: _Warnings,
+) -> tuple[_Spilled, Preparation]:  # fmt: skip
+    """The trial prepared into a second file and cleaned there as the whole trial is
+    (:mod:`mocapkit.markers.streamed_cleaning`); the frames are then read as they are."""
+    names = prep.names
+    ready = RowFile(directory / "prepared.f64", (len(names), 3))
+    filtered = None
+    try:
+        for a in range(0, sp.n, chunk):
+            ready.append(prep.apply(sp.frames(a, min(sp.n, a + chunk))).positions)
+        report = fill_gaps_spilled(
+            sp.times, ready, sp.n, names, rate, opts.fill_gaps, opts.max_gap_s,
+            marker_clusters(ms), chunk,
+        )  # fmt: skip
+        if opts.lowpass_hz:
+            filtered = RowFile(directory / "filtered.f64", (len(names), 3))
+            lowpass_spilled(
+                ready, filtered, sp.n, names, rate, opts.lowpass_hz, report, chunk,
+                None if progress is None else (lambda k, n: progress("filtering", k, n)),
+            )  # fmt: skip
+            ready.close()
+            ready, filtered = filtered, None
+    except BaseException:
+        ready.close()
+        if filtered is not None:
+            filtered.close()
+        raise
+    warn_open_gaps(report, sp.n, rate, warn)
+    sp.positions.close()
+    k = sp.head.n_frames
+    head = MarkerTrajectories(sp.times.read(0, k), ready.read(0, k), names, meta=dict(sp.meta))
+    same = Preparation(UnitCheck(1.0, 0.0, ""), tuple(range(len(names))), names, "z")
+    return replace(sp, names=names, positions=ready, head=head), same
 
 
 def _gap_warning(sp: _Spilled, prep: Preparation, chunk: int, rate: float, warn: _Warnings) -> None:
