@@ -7,7 +7,8 @@ consumer-grade noise) of each length is run through ``mocapkit imu run --filter
 polaris`` online and ``--offline``, as whole processes; reported: wall time and the
 child's peak resident memory (``getrusage(RUSAGE_CHILDREN)``, the maximum of the run
 that just finished, each run in its own fresh parent so the maximum is that run's).
-Target (issue 16): peak memory within 2x from 1 min to 1 h.
+Target (issue 16): peak memory within 2x from 1 min to 1 h. ``--format hdf5`` writes the
+same samples as a BROAD ``.hdf5`` trial instead (read piece by piece through h5py).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ print(json.dumps({"seconds": time.perf_counter() - t0,
 
 
 def make_recording(path: Path, minutes: float, rate: float = 100.0) -> None:
+    """A CSV, or a BROAD-like .hdf5 when ``path`` ends so."""
     from mocapkit.io.imu_csv import write_imu_csv
     from mocapkit.series import ImuRecording
 
@@ -44,6 +46,15 @@ def make_recording(path: Path, minutes: float, rate: float = 100.0) -> None:
     gyr = gyr + 0.01 * rng.normal(size=(n, 3))
     acc = np.tile([0.0, 0.0, 9.81], (n, 1)) + 0.05 * rng.normal(size=(n, 3))
     mag = np.tile([0.0, 20.0, -40.0], (n, 1)) + 0.3 * rng.normal(size=(n, 3))
+    if path.suffix == ".hdf5":
+        import h5py
+
+        with h5py.File(path, "w") as f:
+            f.attrs["sampling_rate"] = rate
+            f["imu_gyr"], f["imu_acc"], f["imu_mag"] = gyr, acc, mag
+            f["opt_quat"] = np.full((n, 4), np.nan)
+            f["movement"] = np.ones(n, dtype=bool)
+        return
     write_imu_csv(path, ImuRecording(t, gyr, acc, mag, name="s"))
 
 
@@ -90,13 +101,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, nargs="+", default=[1.0, 10.0, 60.0])
     parser.add_argument("--rate", type=float, default=100.0, help="sampling rate [Hz]")
+    parser.add_argument("--format", choices=("csv", "hdf5"), default="csv",
+                        help="the recording as a mocapkit CSV or a BROAD .hdf5")  # fmt: skip
     parser.add_argument("--write-docs", action="store_true")
     args = parser.parse_args()
     exe = [sys.executable, "-c", "from mocapkit.cli.main import run; run()"]
     rows = []
     with tempfile.TemporaryDirectory() as d:
         for minutes in args.minutes:
-            src = Path(d) / f"rec_{minutes:g}min.csv"
+            src = Path(d) / f"rec_{minutes:g}min.{args.format}"
             make_recording(src, minutes, args.rate)
             for offline in (False, True):
                 out = str(Path(d) / "out.sto")
@@ -112,11 +125,13 @@ def main() -> None:
     last = {mode: m["peak_mb"] for mn, mode, m in rows if mn == args.minutes[-1]}
     growth = ", ".join(f"{mode} x{last[mode] / first[mode]:.1f}" for mode in first)
     rate_arg = f" --rate {args.rate:g}" if args.rate != 100 else ""
+    rate_arg += " --format hdf5" if args.format == "hdf5" else ""
+    what = "a BROAD .hdf5 trial" if args.format == "hdf5" else "a mocapkit CSV"
     text = (
         f"`python -m benchmarks.memory_vs_length{rate_arg}"
         f" --minutes {' '.join(f'{m:g}' for m in args.minutes)}` (one sensor at "
-        f"{args.rate:g} Hz, a mocapkit CSV, `mocapkit imu run --filter polaris`, whole "
-        "processes; both stream the CSV in pieces of 100,000 rows, offline through files "
+        f"{args.rate:g} Hz, {what}, `mocapkit imu run --filter polaris`, whole "
+        "processes; both stream the file in pieces of 100,000 rows, offline through files "
         "on disk, ~400 bytes a sample while it runs). Peak memory from the shortest to the "
         "longest recording: "
         f"{growth} (target: within x2).\n\n" + "\n".join(lines)
@@ -124,7 +139,8 @@ def main() -> None:
     print(text)
     if args.write_docs:
         heading = "Memory and time against recording length"
-        write_section(heading + (f", {args.rate:g} Hz" if args.rate != 100 else ""), text)
+        heading += f", {args.rate:g} Hz" if args.rate != 100 else ""
+        write_section(heading + (", BROAD .hdf5" if args.format == "hdf5" else ""), text)
 
 
 if __name__ == "__main__":

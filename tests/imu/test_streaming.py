@@ -13,7 +13,7 @@ from mocapkit.cli.main import main
 from mocapkit.errors import ConfigError
 from mocapkit.imu.filters import make_filter
 from mocapkit.imu.filters.base import recording_steps
-from mocapkit.imu.streaming import run_csv_offline, run_csv_streaming
+from mocapkit.imu.streaming import run_file_offline, run_file_streaming
 from mocapkit.io.imu_csv import iter_imu_csv, read_imu_csv, write_imu_csv
 from mocapkit.io.opensim_table import read_table
 from mocapkit.series import ImuRecording
@@ -44,7 +44,7 @@ def test_pieces_give_the_whole_run(tmp_path: Path, mode: str) -> None:
     rate = next(iter_imu_csv(src, chunk_rows=700)).rate_hz
     whole = make_filter("polaris", rate).run_recording(rec, use_mag=mode == "9d")
     out = tmp_path / "o.sto"
-    rep = run_csv_streaming(src, "polaris", out, mode=mode, chunk_rows=700)
+    rep = run_file_streaming(src, "polaris", out, mode=mode, chunk_rows=700)
     assert rep.chunks == 8
     assert rep.rows == rec.n_samples
     table = read_table(out)
@@ -112,7 +112,7 @@ def test_offline_pieces_on_disk_give_the_whole_smoother(tmp_path: Path, mode: st
     out = tmp_path / "o.sto"
     work = tmp_path / "work"
     work.mkdir()
-    rep = run_csv_offline(src, "polaris", out, mode=mode, chunk_rows=700, workdir=work)
+    rep = run_file_offline(src, "polaris", out, mode=mode, chunk_rows=700, workdir=work)
     assert (rep.chunks, rep.rows) == (8, rec.n_samples)
     assert not list(work.iterdir())  # the temporary files are gone
     table = read_table(out)
@@ -125,7 +125,7 @@ def test_offline_needs_a_filter_with_an_offline_mode(tmp_path: Path) -> None:
     src = tmp_path / "s.csv"
     _recording(src, n=300, lost=False)
     with pytest.raises(ConfigError, match="has no offline mode"):
-        run_csv_offline(src, "bachmann", tmp_path / "o.sto", workdir=tmp_path)
+        run_file_offline(src, "bachmann", tmp_path / "o.sto", workdir=tmp_path)
     assert [p.name for p in tmp_path.iterdir()] == ["s.csv"]
 
 
@@ -144,3 +144,60 @@ def test_lost_samples_at_a_batch_start_are_integrated_as_in_one_run(tmp_path: Pa
                            dt=steps[i : i + 1]))  # fmt: skip
     parts.append(f.run(rec.gyr[2110:], rec.acc[2110:], rec.mag[2110:], dt=steps[2110:]))
     np.testing.assert_allclose(np.concatenate(parts), whole, atol=1e-12)
+
+
+def _broad(path: Path, n: int = 3000) -> Path:
+    """A BROAD-like .hdf5 trial (the datasets and attribute its reader needs)."""
+    import h5py
+
+    rec = _recording(path.with_suffix(".csv"), n=n, lost=False)
+    with h5py.File(path, "w") as f:
+        f.attrs["sampling_rate"] = 100.0
+        f["imu_gyr"], f["imu_acc"], f["imu_mag"] = rec.gyr, rec.acc, rec.mag
+        f["opt_quat"] = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+        f["movement"] = np.ones(n, dtype=bool)
+    return path
+
+
+def test_a_broad_trial_streams_as_the_whole_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from mocapkit.io.broad import iter_broad_imu, read_broad_trial
+
+    src = _broad(tmp_path / "trial.hdf5")
+    rec = read_broad_trial(src).imu
+    pieces = list(iter_broad_imu(src, chunk_rows=700))
+    assert [p.n_samples for p in pieces] == [700, 700, 700, 700, 200]
+    np.testing.assert_array_equal(np.concatenate([p.time for p in pieces]), rec.time)
+    np.testing.assert_array_equal(np.concatenate([p.gyr for p in pieces]), rec.gyr)
+    # the rate from the first piece's steps, as the stream takes it (test above)
+    rate = pieces[0].rate_hz
+    whole = make_filter("polaris", rate).run_recording(rec)
+    rep = run_file_streaming(src, "polaris", tmp_path / "o.sto", chunk_rows=700)
+    assert (rep.chunks, rep.rows, rep.sensor) == (5, 3000, "trial")
+    np.testing.assert_allclose(read_table(tmp_path / "o.sto").data[:, 0], whole.quat, atol=1e-9)
+    filt = make_filter("polaris", rate)
+    smoothed = filt.run_offline(rec.gyr, rec.acc, rec.mag, dt=recording_steps(rec, filt.params.dt))
+    run_file_offline(src, "polaris", tmp_path / "s.sto", chunk_rows=700, workdir=tmp_path)
+    np.testing.assert_allclose(read_table(tmp_path / "s.sto").data[:, 0], smoothed, atol=1e-9)
+    rc = main(
+        ["imu", "run", str(src), "--filter", "polaris", "-o", str(tmp_path / "c.sto"), "--json"]
+    )
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["streamed"] is True
+    assert out["rows"] == 3000
+
+
+def test_a_broad_trial_with_rows_missing_is_named(tmp_path: Path) -> None:
+    import h5py
+
+    from mocapkit.errors import FileFormatError
+    from mocapkit.io.broad import iter_broad_imu
+
+    src = _broad(tmp_path / "trial.hdf5", n=500)
+    with h5py.File(src, "a") as f:
+        del f["imu_mag"]
+        f["imu_mag"] = np.zeros((400, 3))
+    with pytest.raises(FileFormatError, match="imu_gyr has 500 rows, imu_acc 500, imu_mag 400"):
+        list(iter_broad_imu(src))

@@ -318,16 +318,17 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _streams(args: argparse.Namespace) -> bool:
-    """Read, filtered and written piece by piece: one mocapkit IMU CSV (online, or
-    smoothed offline through files on disk), or an x-IMU3 export (online: every sensor on
-    its own clock through files on disk, then resampled onto one time base)."""
+    """Read, filtered and written piece by piece: one mocapkit IMU CSV or BROAD .hdf5
+    trial (online, or smoothed offline through files on disk), or an x-IMU3 export
+    (online: every sensor on its own clock through files on disk, then resampled onto one
+    time base)."""
     from mocapkit.io.ximu3 import is_ximu3_sensor, ximu3_sensor_dirs
 
     path = Path(args.path)
     if args.filter_name == DEVICE or args.remove_gyr_bias:
         return False
     if path.is_file():
-        return path.suffix.lower() == ".csv" and not args.sensor
+        return path.suffix.lower() in (".csv", ".hdf5", ".h5") and not args.sensor
     return (
         path.is_dir()
         and not args.offline
@@ -336,7 +337,7 @@ def _streams(args: argparse.Namespace) -> bool:
 
 
 def _run_streamed(args: argparse.Namespace) -> int:
-    from mocapkit.imu.streaming import run_csv_offline, run_csv_streaming, run_ximu3_streaming
+    from mocapkit.imu.streaming import run_file_offline, run_file_streaming, run_ximu3_streaming
 
     path = Path(args.path)
     if path.is_dir():
@@ -346,7 +347,7 @@ def _run_streamed(args: argparse.Namespace) -> int:
             print(note, file=sys.stderr)
         labels = ["_".join(n.split()) for n in rep.sensors]
     else:
-        run = run_csv_offline if args.offline else run_csv_streaming
+        run = run_file_offline if args.offline else run_file_streaming
         rep = run(path, args.filter_name, args.output, mode=args.mode,
                   params=dict(args.param))  # fmt: skip
         if rep.mag_gaps or rep.acc_rejected or rep.mag_rejected:

@@ -1,23 +1,23 @@
 """One sensor's recording through an online filter piece by piece: memory bounded by a
 piece, whatever the recording's length (issue 16: an hour at 1 kHz).
 
-``mocapkit imu run`` takes this path for a mocapkit IMU CSV run online
-(:func:`run_csv_streaming`): the CSV is read ``chunk_rows`` rows at a time
-(:func:`mocapkit.io.imu_csv.iter_imu_csv`), each piece goes through the same filter
+``mocapkit imu run`` takes this path for one sensor's file, a mocapkit IMU CSV or a BROAD
+``.hdf5`` trial, run online (:func:`run_file_streaming`): the file is read ``chunk_rows``
+rows at a time (:func:`recording_pieces`), each piece goes through the same filter
 object (its state carried from piece to piece: the result equals one run over the whole
 recording), and its orientations are appended to the output table at once. Everything
 else (several sensors on their own clocks, device orientations,
 bias removal from a rest period) reads the whole recording first.
 
-Offline (``--offline``, polaris) the CSV is read the same way and its validated samples
-go to files in a temporary directory (:func:`run_csv_offline`); the smoother's passes then
+Offline (``--offline``, polaris) the file is read the same way and its validated samples
+go to files in a temporary directory (:func:`run_file_offline`); the smoother's passes then
 run over those files piece by piece (:mod:`mocapkit.imu.filters.polaris_offline_chunks`,
 the same numbers as in memory), and each smoothed piece is appended to the table.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,6 +28,7 @@ from mocapkit._validate import FloatArray
 from mocapkit.errors import ConfigError, DataError
 from mocapkit.io.imu_csv import CHUNK_ROWS, iter_imu_csv
 from mocapkit.io.opensim_table import QuaternionTableWriter
+from mocapkit.series import ImuRecording
 
 SENSOR_CHUNK_ROWS = 20_000  # rows of one sensor of several in memory at a time
 
@@ -47,7 +48,18 @@ class StreamReport:
     notes: list[str] = field(default_factory=list)
 
 
-def run_csv_streaming(
+def recording_pieces(path: Path, chunk_rows: int = CHUNK_ROWS) -> Iterator[ImuRecording]:
+    """One sensor's recording file in pieces of ``chunk_rows`` rows, read as they go: a
+    mocapkit IMU CSV (:func:`~mocapkit.io.imu_csv.iter_imu_csv`) or a BROAD ``.hdf5``
+    trial (:func:`~mocapkit.io.broad.iter_broad_imu`)."""
+    if Path(path).suffix.lower() in (".hdf5", ".h5"):
+        from mocapkit.io.broad import iter_broad_imu
+
+        return iter_broad_imu(path, chunk_rows)
+    return iter_imu_csv(path, chunk_rows=chunk_rows)
+
+
+def run_file_streaming(
     path: Path,
     filter_name: str,
     output: Path,
@@ -56,14 +68,15 @@ def run_csv_streaming(
     params: dict[str, Any] | None = None,
     chunk_rows: int = CHUNK_ROWS,
 ) -> StreamReport:
-    """A mocapkit IMU CSV through an online filter into an orientation table, piece by
-    piece (module docstring). Time in the table starts at 0 (the first sample)."""
+    """One sensor's file (a mocapkit IMU CSV or a BROAD .hdf5) through an online filter
+    into an orientation table, piece by piece (module docstring). Time in the table starts
+    at 0 (the first sample)."""
     from mocapkit.imu.sensor_spill import filter_pieces
 
     report = StreamReport()
     writer: QuaternionTableWriter | None = None
     t0 = t_last = 0.0
-    pieces = iter_imu_csv(path, chunk_rows=chunk_rows)
+    pieces = recording_pieces(path, chunk_rows)
     try:
         for piece, q, r in filter_pieces(pieces, filter_name, mode, params, source=path):
             if writer is None:
@@ -85,7 +98,7 @@ def run_csv_streaming(
     return report
 
 
-def run_csv_offline(
+def run_file_offline(
     path: Path,
     filter_name: str,
     output: Path,
@@ -95,9 +108,10 @@ def run_csv_offline(
     chunk_rows: int = CHUNK_ROWS,
     workdir: str | Path | None = None,
 ) -> StreamReport:
-    """A mocapkit IMU CSV through the offline smoother (polaris, forward-backward) into an
-    orientation table in bounded memory (module docstring): ``chunk_rows`` samples in
-    memory at a time, ~400 bytes a sample on disk in ``workdir`` (default
+    """One sensor's file (a mocapkit IMU CSV or a BROAD .hdf5) through the offline
+    smoother (polaris, forward-backward) into an orientation table in bounded memory
+    (module docstring): ``chunk_rows`` samples in memory at a time, ~400 bytes a sample on
+    disk in ``workdir`` (default
     :func:`~mocapkit.imu.filters.polaris_offline_chunks.default_workdir`) while it runs."""
     import tempfile
 
@@ -112,7 +126,7 @@ def run_csv_offline(
                                      dir=workdir or default_workdir()) as tmp:  # fmt: skip
         store = DiskStore(tmp)
         try:
-            filt, use_acc, use_mag, rate = _spill_csv(path, filter_name, mode, params,
+            filt, use_acc, use_mag, rate = _spill_file(path, filter_name, mode, params,
                                                       chunk_rows, store, report)  # fmt: skip
             n = report.rows
             label = "_".join(report.sensor.split())
@@ -136,11 +150,11 @@ def run_csv_offline(
     return report
 
 
-def _spill_csv(
+def _spill_file(
     path: Path, filter_name: str, mode: str, params: dict[str, Any] | None, chunk_rows: int,
     store: Any, report: StreamReport,
 ) -> tuple[Any, np.ndarray, np.ndarray, float]:  # fmt: skip
-    """Read the CSV piece by piece, validate each piece as the filter would (with the
+    """Read the file piece by piece, validate each piece as the filter would (with the
     previous piece's last gyroscope reading), and write the validated samples and their
     time to ``store``. Returns the filter, the accelerometer and magnetometer flags (N,)
     and the rate [Hz]."""
@@ -154,7 +168,7 @@ def _spill_csv(
     last_gyr: np.ndarray | None = None
     rate = 0.0
     t_last = 0.0
-    for piece in iter_imu_csv(path, chunk_rows=chunk_rows):
+    for piece in recording_pieces(path, chunk_rows):
         if filt is None:
             check_units(piece)
             if piece.n_samples < 2:
@@ -186,12 +200,17 @@ def _spill_csv(
         last_gyr = piece.gyr[-1].copy()
         t_last = float(piece.time[-1])
         report.rows += piece.n_samples
-    assert filt is not None  # iter_imu_csv yields at least one piece or raises
+    if filt is None:
+        raise DataError(f"{path}: no samples")
     report.time_span = (report.time_span[0], t_last)
     return filt, np.concatenate(flags_acc), np.concatenate(flags_mag), rate
 
 
-__all__ = ["StreamReport", "run_csv_offline", "run_csv_streaming"]
+# the names before BROAD files streamed too
+run_csv_streaming = run_file_streaming
+run_csv_offline = run_file_offline
+
+__all__ = ["StreamReport", "recording_pieces", "run_file_offline", "run_file_streaming"]
 
 
 def spill_ximu3(

@@ -9,8 +9,10 @@ attribute ``sampling_rate`` [Hz].
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -53,8 +55,6 @@ def _read_mat(p: Path) -> dict[str, np.ndarray]:
 
 def read_broad_trial(path: str | Path) -> BroadTrial:
     """Read one BROAD trial: ``.hdf5`` (``data_hdf5/``) or ``.mat`` (``data_mat/``)."""
-    import h5py
-
     p = Path(path)
     if p.suffix.lower() == ".mat":
         d = _read_mat(p)
@@ -68,19 +68,8 @@ def read_broad_trial(path: str | Path) -> BroadTrial:
             np.asarray(d["movement"]).astype(bool).reshape(-1),
             np.asarray(d["opt_pos"], dtype=np.float64) if "opt_pos" in d else None,
         )
-    try:
-        f = h5py.File(p, "r")
-    except OSError as exc:
-        raise FileFormatError(f"{p}: not a readable HDF5 file ({exc})") from exc
+    f, rate = _open_hdf5(p)
     with f:
-        missing = [k for k in _REQUIRED if k not in f]
-        if missing:
-            raise FileFormatError(
-                f"{p}: missing dataset(s) {', '.join(missing)}; is this a BROAD data_hdf5 trial?"
-            )
-        if "sampling_rate" not in f.attrs:
-            raise FileFormatError(f"{p}: missing attribute 'sampling_rate'")
-        rate = float(f.attrs["sampling_rate"])
         gyr = np.asarray(f["imu_gyr"], dtype=np.float64)
         acc = np.asarray(f["imu_acc"], dtype=np.float64)
         mag = np.asarray(f["imu_mag"], dtype=np.float64)
@@ -88,6 +77,52 @@ def read_broad_trial(path: str | Path) -> BroadTrial:
         movement = np.asarray(f["movement"], dtype=bool).reshape(-1)
         pos = np.asarray(f["opt_pos"], dtype=np.float64) if "opt_pos" in f else None
     return _trial(p, rate, gyr, acc, mag, quat, movement, pos)
+
+
+def _open_hdf5(p: Path) -> tuple[Any, float]:
+    """The open h5py file of a BROAD trial, checked, and its sampling rate [Hz]."""
+    import h5py
+
+    try:
+        f = h5py.File(p, "r")
+    except OSError as exc:
+        raise FileFormatError(f"{p}: not a readable HDF5 file ({exc})") from exc
+    missing = [k for k in _REQUIRED if k not in f]
+    if missing or "sampling_rate" not in f.attrs:
+        f.close()
+        if missing:
+            raise FileFormatError(
+                f"{p}: missing dataset(s) {', '.join(missing)}; is this a BROAD data_hdf5 trial?"
+            )
+        raise FileFormatError(f"{p}: missing attribute 'sampling_rate'")
+    return f, float(f.attrs["sampling_rate"])
+
+
+def iter_broad_imu(path: str | Path, chunk_rows: int = 100_000) -> Iterator[ImuRecording]:
+    """The IMU samples of a BROAD ``.hdf5`` trial in pieces of ``chunk_rows`` rows, read
+    from the file as they go (h5py reads the rows asked for): the recording of
+    :func:`read_broad_trial` in bounded memory (``imu run`` on an hour at 1 kHz)."""
+    p = Path(path)
+    f, rate = _open_hdf5(p)
+    with f:
+        gyr, acc, mag = f["imu_gyr"], f["imu_acc"], f["imu_mag"]
+        n = int(gyr.shape[0])
+        if acc.shape[0] != n or mag.shape[0] != n:
+            raise FileFormatError(
+                f"{p}: imu_gyr has {n} rows, imu_acc {acc.shape[0]}, imu_mag {mag.shape[0]}; "
+                "a BROAD trial has one row per sample in each"
+            )
+        meta = {"sampling_rate": rate, "source": str(p)}
+        for a in range(0, n, chunk_rows):
+            b = min(n, a + chunk_rows)
+            yield ImuRecording(
+                np.arange(a, b) / rate,
+                np.asarray(gyr[a:b], dtype=np.float64),
+                np.asarray(acc[a:b], dtype=np.float64),
+                np.asarray(mag[a:b], dtype=np.float64),
+                name=p.stem,
+                meta=dict(meta),
+            )
 
 
 def _trial(
