@@ -1,14 +1,16 @@
 """Time and peak memory of ``mocapkit retarget`` against recording length (issue 16).
 
-    python -m benchmarks.memory_retarget [--minutes 1 10 60] [--robot g1] [--source mot|trc]
-        [--write-docs]
+    python -m benchmarks.memory_retarget [--minutes 1 10 60] [--robot g1]
+        [--source mot|trc|ximu3] [--write-docs]
 
 OpenSim's gait2392 walk (``subject01_walk1.trc`` in ../shared), reconstructed once by
 ``mocapkit markers reconstruct`` into joint angles, is played forwards then backwards to
 the length asked for (continuous) and written as a .mot; ``mocapkit retarget WALK.mot
 --robot g1 -o OUT.csv`` (collision guard on, as by default) runs on it as a whole process.
 ``--source trc``: the TRC itself played to the length (``benchmarks.memory_markers``), so
-the command reconstructs and retargets it.
+the command reconstructs and retargets it. ``--source ximu3``: the 7-sensor x-IMU3
+lower-body recording tiled to the length (``benchmarks.memory_ximu3``, its devices'
+orientations too), retargeted with ``--preset lower_body`` through the body model.
 Reported: wall time and the child's peak resident memory. Target (issue 16): within 2x
 from 1 min to 1 h.
 """
@@ -16,6 +18,7 @@ from 1 min to 1 h.
 from __future__ import annotations
 
 import argparse
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -25,6 +28,7 @@ import numpy as np
 
 from benchmarks.memory_markers import long_trial
 from benchmarks.memory_vs_length import length_report, measure
+from benchmarks.memory_ximu3 import long_export
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 TRC = SHARED / "opensim" / "gait2392" / "subject01_walk1.trc"
@@ -49,7 +53,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, nargs="+", default=[1.0, 10.0, 60.0])
     parser.add_argument("--robot", default="g1")
-    parser.add_argument("--source", choices=["mot", "trc"], default="mot")
+    parser.add_argument("--source", choices=["mot", "trc", "ximu3"], default="mot")
     parser.add_argument("--write-docs", action="store_true")
     args = parser.parse_args()
     if not TRC.exists():
@@ -62,14 +66,25 @@ def main() -> None:
                             "-o", str(walk)], check=True, capture_output=True)  # fmt: skip
         for minutes in args.minutes:
             src = Path(d) / f"walk_{minutes:g}min.{args.source}"
-            frames = (long_angles(walk, src, minutes) if args.source == "mot"
-                      else long_trial(src, minutes))  # fmt: skip
-            height = ["--height", "1.80"] if args.source == "trc" else []
-            m = measure([*CLI, "retarget", str(src), "--robot", args.robot, *height,
+            extra = ["--height", "1.80"] if args.source == "trc" else []
+            if args.source == "ximu3":
+                long_export(src, minutes, ("Inertial.csv", "Quaternion.csv"))
+                first = next(p for p in src.iterdir() if p.is_dir())
+                with open(first / "Quaternion.csv") as f:
+                    frames = sum(1 for _ in f) - 1
+                extra = ["--preset", "lower_body"]
+            elif args.source == "mot":
+                frames = long_angles(walk, src, minutes)
+            else:
+                frames = long_trial(src, minutes)
+            m = measure([*CLI, "retarget", str(src), "--robot", args.robot, *extra,
                          "-o", str(Path(d) / "out.csv")])  # fmt: skip
             rows.append((minutes, frames, m))
             print(minutes, frames, m, flush=True)
-            src.unlink()
+            if src.is_dir():
+                shutil.rmtree(src)
+            else:
+                src.unlink()
     lengths = " ".join(f"{x:g}" for x in args.minutes)
     command = f"python -m benchmarks.memory_retarget --minutes {lengths} --robot {args.robot}"
     if args.source == "mot":
@@ -79,6 +94,16 @@ def main() -> None:
             "forwards and backwards to the length at 60 Hz; `mocapkit retarget WALK.mot "
             f"--robot {args.robot} -o OUT.csv`, collision guard on, whole processes",
             "Memory and time against recording length: retarget", args.write_docs,
+        )  # fmt: skip
+    elif args.source == "ximu3":
+        length_report(
+            rows, f"{command} --source ximu3",
+            "the 7-sensor x-IMU3 lower-body recording in ../shared (18.6 s at 50 Hz) tiled "
+            "to the length (`benchmarks.memory_ximu3`); `mocapkit retarget EXPORT --robot "
+            f"{args.robot} --preset lower_body -o OUT.csv` (the devices' orientations "
+            "through the body model, then retargeted), collision guard on, whole processes",
+            "Memory and time against recording length: retarget from an x-IMU3 export",
+            args.write_docs,
         )  # fmt: skip
     else:
         length_report(

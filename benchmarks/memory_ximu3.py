@@ -41,8 +41,10 @@ def _tile(src: Path, dst: Path, copies: int) -> None:
                               for t, r in zip(times, rows, strict=True)) + "\n")  # fmt: skip
 
 
-def long_export(dst: Path, minutes: float) -> int:
-    """The export repeated to ``minutes``; returns the copies."""
+def long_export(
+    dst: Path, minutes: float, files: tuple[str, ...] = ("Inertial.csv", "Magnetometer.csv")
+) -> int:
+    """The export repeated to ``minutes`` (its ``files`` per sensor); returns the copies."""
     first = next(p for p in EXPORT.iterdir() if p.is_dir())
     lines = (first / "Inertial.csv").read_text().splitlines()[1:]
     span_s = (float(lines[-1].split(",")[0]) - float(lines[0].split(",")[0])) * 1e-6
@@ -51,7 +53,7 @@ def long_export(dst: Path, minutes: float) -> int:
         out = dst / sensor.name
         out.mkdir(parents=True)
         shutil.copy(sensor / "Command.json", out / "Command.json")
-        for name in ("Inertial.csv", "Magnetometer.csv"):
+        for name in files:
             _tile(sensor / name, out / name, copies)
     return copies
 

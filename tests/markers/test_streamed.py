@@ -196,3 +196,24 @@ def test_a_marker_partly_nan_in_a_later_block_is_named(
         reconstruct_streamed(
             trial, None, "gait2392", 1.8, 72.0, ReconstructionOptions(), tmp_path / "o.mot"
         )
+
+
+@pytest.mark.parametrize(
+    "options",
+    [ReconstructionOptions(method="ik"), ReconstructionOptions(mode="online")],
+    ids=["ik", "online"],
+)
+def test_ik_and_online_mode_run_piece_by_piece(
+    tmp_path: Path, options: ReconstructionOptions
+) -> None:
+    """IK warm-starts each piece from the last frame's solution (its first frame with the
+    usual iterations, not the trial's first frame's); online mode steps the same
+    controller on: the whole trial's files and figures."""
+    assert streamed.streamable(tmp_path / "x.trc", options) is None
+    trial = _synthetic_trc(tmp_path / "walk.trc", n=150)
+    result, _, _ = run(trial, None, "gait2392", 1.8, 72.0, options)
+    result.write_mot(tmp_path / "whole.mot")
+    s = reconstruct_streamed(trial, None, "gait2392", 1.8, 72.0, options, tmp_path / "st.mot",
+                             chunk_frames=37)  # fmt: skip
+    _same_tables(tmp_path / "whole.mot", tmp_path / "st.mot")
+    assert _figures(s.metrics) == _figures(result.metrics())

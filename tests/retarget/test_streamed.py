@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import shutil
+
 import numpy as np
 import pytest
 
-from mocapkit.errors import DataError
+from mocapkit.errors import ConfigError, DataError
 from mocapkit.retarget.run import retarget, write_trajectory
 from mocapkit.retarget.streamed import retarget_streamed
 from tests.body.synth import write_walk_mot
@@ -182,3 +184,59 @@ def test_a_marker_trial_is_reconstructed_and_retargeted_in_pieces(tmp_path):
     assert res.figures == whole.figures
     assert out.read_bytes() == (tmp_path / "whole.csv").read_bytes()
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def _ximu3_export(tmp_path, seconds: float = 8.0):  # type: ignore[no-untyped-def]
+    """A lower-body x-IMU3 export of a gait-like motion: per sensor a directory with the
+    device's orientation (Quaternion.csv, NWU, each sensor on its own clock, 2 ms apart)
+    and an Inertial.csv (which marks the directory as a sensor's)."""
+    from mocapkit.body.calibration import pose_coordinates
+    from mocapkit.body.sensor_tree import SensorTree
+    from mocapkit.geometry import quat_conj, quat_mul
+    from mocapkit.io.ximu3 import Q_ENU_NWU
+    from tests.body.synth import gait_like, random_mountings, sensor_orientations
+
+    tree = SensorTree.preset("lower_body")
+    t = np.arange(int(seconds * 100)) / 100.0
+    coords = gait_like(tree, t, 1.0, pose_coordinates(tree, "npose"), seed=5)
+    mounts = random_mountings(tree, np.random.default_rng(5))
+    oris = sensor_orientations(tree, t, coords, mounts, heading_rad=0.8)
+    root = tmp_path / "export"
+    for k, (name, s) in enumerate(oris.items()):
+        d = root / f"{name} {0x64F00000 + k:08X} (UDP)"
+        d.mkdir(parents=True)
+        us = np.round((s.time + 0.002 * k) * 1e6)
+        q = quat_mul(quat_conj(Q_ENU_NWU), s.quat)
+        rows = "\n".join(f"{u:.0f},{w:.9f},{x:.9f},{y:.9f},{z:.9f}" for u, (w, x, y, z)
+                         in zip(us, q, strict=True))  # fmt: skip
+        (d / "Quaternion.csv").write_text("Timestamp (us),W,X,Y,Z\n" + rows + "\n")
+        (d / "Inertial.csv").write_text(
+            "Timestamp (us),Gyroscope X (deg/s),Gyroscope Y (deg/s),Gyroscope Z (deg/s),"
+            "Accelerometer X (g),Accelerometer Y (g),Accelerometer Z (g)\n0,0,0,0,0,0,1\n"
+        )
+    return root
+
+
+def test_an_ximu3_export_goes_through_the_body_model_in_pieces(tmp_path):
+    """The devices' own orientations, as the whole path reads them: each sensor spilled
+    to disk on its own clock, aligned onto one time base a piece at a time, through the
+    streamed body model, then retargeted in pieces."""
+    from mocapkit.retarget.streamed import streamable
+
+    src = _ximu3_export(tmp_path)
+    assert streamable(src)
+    kw = {"preset": "lower_body", "guard_collisions": False}
+    whole = retarget(src, "g1", **kw)  # type: ignore[arg-type]
+    write_trajectory(tmp_path / "whole.csv", whole)
+    res = retarget_streamed(src, "g1", tmp_path / "pieces.csv", piece_frames=170, **kw)  # type: ignore[arg-type]
+    assert res.frames == whole.frames
+    assert res.notes == whole.notes
+    assert res.figures == whole.figures
+    a = np.loadtxt(tmp_path / "whole.csv", delimiter=",", skiprows=1)
+    b = np.loadtxt(tmp_path / "pieces.csv", delimiter=",", skiprows=1)
+    # without the guard the pieces are the whole path's, but for the .mot on disk between
+    # the body model and the solver (10 significant digits)
+    np.testing.assert_allclose(b, a, rtol=0, atol=1e-7)
+    shutil.rmtree(next(src.glob("Right Foot*")))  # a sensor the tree needs, missing
+    with pytest.raises(ConfigError, match="calcn_r <- 'Right Foot'"):
+        retarget_streamed(src, "g1", tmp_path / "x.csv", **kw)  # type: ignore[arg-type]

@@ -63,9 +63,9 @@ def _cmd_presets(args: argparse.Namespace) -> int:
 
 
 def _is_ximu3(path: Path) -> bool:
-    from mocapkit.io.ximu3 import is_ximu3_sensor, ximu3_sensor_dirs
+    from mocapkit.io.ximu3 import is_ximu3_export
 
-    return path.is_dir() and (is_ximu3_sensor(path) or bool(ximu3_sensor_dirs(path)))
+    return is_ximu3_export(path)
 
 
 def _stream_raw(tree: Any, args: argparse.Namespace, options: dict[str, Any]) -> Any:
@@ -77,12 +77,10 @@ def _stream_raw(tree: Any, args: argparse.Namespace, options: dict[str, Any]) ->
     from mocapkit.body.streamed import stream_body
     from mocapkit.imu.sensor_spill import body_pieces
     from mocapkit.imu.streaming import spill_ximu3
-    from mocapkit.io.ximu3 import is_ximu3_sensor, sensor_name, ximu3_sensor_dirs
+    from mocapkit.io.ximu3 import ximu3_sensors
 
-    path = Path(args.recording)
-    tree.check_sensors(  # the whole path's message for a sensor the export lacks
-        [sensor_name(d) for d in ([path] if is_ximu3_sensor(path) else ximu3_sensor_dirs(path))]
-    )
+    # the whole path's message for a sensor the export lacks
+    tree.check_sensors(list(ximu3_sensors(Path(args.recording))))
     options = {k: v for k, v in options.items() if k not in ("start", "stop")}
     with tempfile.TemporaryDirectory(prefix="mocapkit-body-") as tmp:
         spills = spill_ximu3(Path(args.recording), args.filter, args.mode, tmp,

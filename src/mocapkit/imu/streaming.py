@@ -229,19 +229,9 @@ def spill_ximu3(
     in ``directory``; ``report`` tallies what the filters rejected, per sensor in
     ``notes``."""
     from mocapkit.imu.sensor_spill import SensorSpill, filter_pieces
-    from mocapkit.io.ximu3 import (
-        is_ximu3_sensor,
-        iter_ximu3_sensor,
-        sensor_name,
-        ximu3_sensor_dirs,
-    )
+    from mocapkit.io.ximu3 import iter_ximu3_sensor, ximu3_sensors
 
-    dirs: dict[str, Path] = {}
-    for d in [path] if is_ximu3_sensor(path) else ximu3_sensor_dirs(path):
-        name = sensor_name(d)
-        if name in dirs:
-            raise DataError(f"{path}: two sensors are named {name!r} ({d.name})")
-        dirs[name] = d
+    dirs = ximu3_sensors(path)
     if sensors:
         unknown = [s for s in sensors if s not in dirs]
         if unknown:
@@ -273,6 +263,37 @@ def spill_ximu3(
                     f"{spill.name}: {counts[0]} magnetometer gaps and {counts[1]} rejected "
                     f"samples processed as 6D, {counts[2]} accelerometer samples rejected"
                 )
+    except BaseException:
+        for s in spills:
+            s.close()
+        raise
+    return spills
+
+
+def spill_ximu3_device(
+    path: Path, directory: str | Path, sensors: list[str], chunk_rows: int = SENSOR_CHUNK_ROWS
+) -> list[Any]:
+    """The devices' own orientations (``Quaternion.csv``, ENU, as
+    :func:`~mocapkit.io.ximu3.read_ximu3_quaternion`) of the x-IMU3 export's ``sensors``
+    (by name, in that order) into :class:`~mocapkit.imu.sensor_spill.SensorSpill` files in
+    ``directory``, read ``chunk_rows`` rows at a time. A sensor without a name in the
+    export is refused naming the ones it has."""
+    from mocapkit.geometry import quat_mul
+    from mocapkit.imu.sensor_spill import SensorSpill
+    from mocapkit.io.ximu3 import Q_ENU_NWU, QUAT_COLUMNS, _blocks, ximu3_sensors
+
+    dirs = ximu3_sensors(path)
+    unknown = [s for s in sensors if s not in dirs]
+    if unknown:
+        raise ConfigError(f"{path}: no sensor {', '.join(unknown)}; sensors: {', '.join(dirs)}")
+    spills = [SensorSpill(directory, name, i) for i, name in enumerate(sensors)]
+    try:
+        for spill in spills:
+            quat_file = dirs[spill.name] / "Quaternion.csv"
+            if not quat_file.is_file():
+                raise DataError(f"{dirs[spill.name]}: no Quaternion.csv in this x-IMU3 export")
+            for data in _blocks(quat_file, QUAT_COLUMNS, chunk_rows):
+                spill.append(data[:, 0] * 1e-6, quat_mul(Q_ENU_NWU, data[:, 1:5]))
     except BaseException:
         for s in spills:
             s.close()

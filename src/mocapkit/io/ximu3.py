@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit._validate import FloatArray
-from mocapkit.errors import FileFormatError
+from mocapkit.errors import DataError, FileFormatError
 from mocapkit.geometry import quat_from_axis_angle, quat_mul
 from mocapkit.io._text_table import iter_csv_blocks
 from mocapkit.series import ImuRecording, OrientationSeries
@@ -231,6 +231,26 @@ def ximu3_sensor_dirs(directory: str | Path) -> list[Path]:
     if not d.is_dir():
         raise FileFormatError(f"{d}: not a directory")
     return sorted(p for p in d.iterdir() if p.is_dir() and is_ximu3_sensor(p))
+
+
+def is_ximu3_export(path: str | Path) -> bool:
+    """A directory of one x-IMU3 sensor's export, or one holding a sub-directory per
+    sensor."""
+    p = Path(path)
+    return p.is_dir() and (is_ximu3_sensor(p) or bool(ximu3_sensor_dirs(p)))
+
+
+def ximu3_sensors(path: str | Path) -> dict[str, Path]:
+    """``{sensor name: directory}`` of an x-IMU3 export (one sensor's directory, or one
+    holding a sub-directory per sensor); two sensors of one name are refused."""
+    p = Path(path)
+    out: dict[str, Path] = {}
+    for d in [p] if is_ximu3_sensor(p) else ximu3_sensor_dirs(p):
+        name = sensor_name(d)
+        if name in out:
+            raise DataError(f"{p}: two sensors are named {name!r} ({out[name].name}, {d.name})")
+        out[name] = d
+    return out
 
 
 def read_ximu3_directory(directory: str | Path) -> dict[str, ImuRecording]:

@@ -123,6 +123,7 @@ def solve_ik(
     q_posture: FloatArray | None = None,
     params: IKParams | None = None,
     progress: Callable[[int, int], None] | None = None,
+    continues: bool = False,
 ) -> IKSolution:
     """Weighted least-squares IK over frames (in blocks of :data:`BLOCK_FRAMES`;
     ``progress(done, total)`` after each).
@@ -136,6 +137,9 @@ def solve_ik(
         coordinate_tasks: DOF name -> (value [rad], weight) held softly (OpenSim's
             coordinate tasks).
         q_posture: (nq,) the posture prior's target (default: ``q_init``).
+        continues: ``X`` continues a trial whose previous frame's solution is ``q_init``
+            (a piece of a long trial): its first frame gets the usual iterations, not the
+            first frame's (the same numbers as one call over both).
     """
     p = params or IKParams()
     X = np.ascontiguousarray(X, dtype=float)
@@ -155,7 +159,7 @@ def solve_ik(
         N = X.shape[0]
         for a in range(0, N, BLOCK_FRAMES):  # blocks: the same numbers as one call
             b = min(N, a + BLOCK_FRAMES)
-            first_iter = p.max_iter_first if a == 0 else p.max_iter
+            first_iter = p.max_iter_first if a == 0 and not continues else p.max_iter
             Qb, Cb, Itb = ik_trial(
                 fm.parent, fm.R0, fm.p0, fm.axis, fm.marker_joint, fm.marker_offset,
                 q, X[a:b], w, pv, pw, lo, hi, first_iter, p.max_iter, p.tol,
@@ -169,7 +173,7 @@ def solve_ik(
     Qs, Cs, Its = [], [], []
     q = q0
     for f in range(X.shape[0]):
-        it_max = p.max_iter_first if f == 0 else p.max_iter
+        it_max = p.max_iter_first if f == 0 and not continues else p.max_iter
         q, c, it = _ik_frame_reference(kin, q, X[f], w, pv, pw, lo, hi, it_max, p.tol)
         Qs.append(q)
         Cs.append(c)

@@ -20,16 +20,16 @@ Equal to the whole-trial path (:func:`mocapkit.markers.reconstruct.run`) to roun
 (tests/markers/test_streamed.py), except that on trials longer than :data:`HEAD_S` the
 decisions above rest on its first :data:`HEAD_S` seconds, and the conditioning figures
 sample each visibility pattern per piece. Gap filling and low-pass filtering run on a
-prepared copy of the frames on disk (:mod:`mocapkit.markers.streamed_cleaning`). IK,
-online mode and the reference backend take the whole-trial path (:func:`streamable`
-says why).
+prepared copy of the frames on disk (:mod:`mocapkit.markers.streamed_cleaning`). IK
+(each piece warm-started from the last frame) and online mode (the controller stepped
+on) run piece by piece too; the reference backend takes the whole-trial path
+(:func:`streamable` says why).
 """
 
 from __future__ import annotations
 
 import logging
 import tempfile
-import time as _time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -46,7 +46,7 @@ from mocapkit.errors import ConfigError, DataError
 from mocapkit.markers.cleaning import _runs
 from mocapkit.markers.conventions import UnitCheck
 from mocapkit.markers.coverage import Coverage, MetricsTally
-from mocapkit.markers.osc import OfflineTracker, target_derivatives
+from mocapkit.markers.pieces import piece_solver
 from mocapkit.markers.reconstruct import (
     Preparation,
     Progress,
@@ -86,8 +86,6 @@ def streamable(trial_path: str | Path, options: ReconstructionOptions) -> str | 
     """None when the trial can be reconstructed piece by piece, else why not."""
     if Path(trial_path).suffix.lower() not in (".trc", ".c3d"):
         return "not a .trc or .c3d file"
-    if options.method != "osc" or options.mode != "offline":
-        return f"--method {options.method} --mode {options.mode} runs on the whole trial"
     if options.osc.backend != "fast":
         return "the reference backend runs on the whole trial"
     return None
@@ -568,29 +566,17 @@ def _track(
     q_init = _initial_pose(subject, names, x_first, plan.weights)
     _, X2 = frames(0, min(sp.n, 2))
     _warm_up(subject, names, X2, plan.weights, plan.levels, q_init, rate, opts)
-    wmap = dict(zip(names, plan.weights.tolist(), strict=True))
-    tracker = OfflineTracker(
-        human, names, plan.levels, plan.tasks, q_init, rate, human.neutral(), opts.osc, wmap
-    )
+    solve = piece_solver(subject, plan, opts, q_init, rate, frames, sp.n)
     tally, coverage = MetricsTally(), Coverage(names=())
     tail = None
     levels = [list(level) for level in plan.levels]
     result: ReconstructionResult | None = None
     for a in range(0, sp.n, chunk):
         b = min(sp.n, a + chunk)
-        lo, hi = max(0, a - 2), min(sp.n, b + 1)  # derivatives at a-1 .. b-1
-        t_ext, X_ext = frames(lo, hi)
-        Xd, Xdd = target_derivatives(X_ext, rate)
-        s0 = a - lo
-        start, stop = (s0 - 1 if a > 0 else s0), s0 + (b - a)
-        t0 = _time.perf_counter()
-        Q, P, DQ, _ = tracker.run(
-            X_ext[start:stop], Xd[start:stop], Xdd[start:stop], continues=a > 0
-        )
-        elapsed = _time.perf_counter() - t0
+        t_p, X_p, Q, P, DQ, elapsed = solve(a, b)
         result = ReconstructionResult.build(
-            t_ext[s0:stop], human, names, plan.tracked, X_ext[s0:stop], Q, DQ, elapsed,
-            "osc", "offline", levels, plan.tasks, [], plan.weights,
+            t_p, human, names, plan.tracked, X_p, Q, DQ, elapsed, opts.method, opts.mode,
+            levels, plan.tasks, [], plan.weights,
             with_total=opts.total_bound, P=P, root_angles_before=tail, quiet=True,
         )  # fmt: skip
         tail = result.root_angles_tail

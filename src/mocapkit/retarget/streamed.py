@@ -24,7 +24,8 @@ near-contact decisions (hull tests, bisections) follow rounding that depends on 
 arrays fall in memory: median ~1e-5 rad, up to ~1e-3-1e-2 rad near a contact, fading.
 A marker trial longer than ``markers.streamed.HEAD_S`` is scaled from its start (as
 ``markers reconstruct`` does); an orientation table is calibrated from its start (as
-``body angles`` does). BVH, qmt .mat files and x-IMU3 exports are still retargeted whole.
+``body angles`` does); an x-IMU3 export's device orientations go the same way. BVH and
+qmt .mat files are still retargeted whole.
 """
 
 from __future__ import annotations
@@ -60,8 +61,14 @@ PIECE_FRAMES = 5000
 
 def streamable(path: str | Path) -> bool:
     """Whether ``path`` is retargeted piece by piece: a joint-angle file, an OpenSense
-    orientation table or a marker trial (:func:`retarget_streamed`)."""
-    return Path(path).suffix.lower() in ANGLE_SUFFIXES + MARKER_SUFFIXES
+    orientation table, a marker trial or an x-IMU3 export (:func:`retarget_streamed`)."""
+    return Path(path).suffix.lower() in ANGLE_SUFFIXES + MARKER_SUFFIXES or _is_ximu3(Path(path))
+
+
+def _is_ximu3(path: Path) -> bool:
+    from mocapkit.io.ximu3 import is_ximu3_export
+
+    return is_ximu3_export(path)
 
 
 @dataclass
@@ -186,6 +193,8 @@ def retarget_streamed(
                   "guard_collisions": guard_collisions}  # fmt: skip
     if path.suffix.lower() in MARKER_SUFFIXES:
         return _markers(path, robot, output, height_m, piece_frames, collisions)
+    if _is_ximu3(path):
+        return _orientations(path, robot, output, preset, piece_frames, collisions)
     if table_is_quaternion(path):
         return _orientations(path, robot, output, preset, piece_frames, collisions)
     return _angles(path, robot, output, piece_frames, collisions)
@@ -206,7 +215,9 @@ def _orientations(
     path: Path, robot: str | Path, output: str | Path | None, preset: str, rows: int,
     collisions: dict[str, bool],
 ) -> StreamedRetarget:  # fmt: skip
-    """An OpenSense orientation table (an inertial recording): the body model streams its
+    """An inertial recording, an OpenSense orientation table or an x-IMU3 export (its
+    devices' own orientations, as the whole path reads them: each sensor into a file on
+    disk, then aligned onto one time base a piece at a time): the body model streams its
     joint angles into a ``.mot`` on disk (:func:`mocapkit.body.streamed.stream_body`,
     automatic calibration from the start of the recording, as ``body angles`` does),
     which is then retargeted in pieces."""
@@ -215,10 +226,26 @@ def _orientations(
     from mocapkit.body.sensor_tree import SensorTree
     from mocapkit.body.streamed import stream_body
 
+    tree = SensorTree.preset(preset)
     with tempfile.TemporaryDirectory(dir=_beside(output), prefix=".mocapkit-retarget-") as d:
-        angles = Path(d) / f"{path.stem}.mot"
-        stream_body(SensorTree.preset(preset), path, output=angles, calibration="auto",
-                    heading_alignment="hinges", rows=rows)  # fmt: skip
+        angles = Path(d) / f"{path.name}.mot"
+        if _is_ximu3(path):
+            from mocapkit.imu.sensor_spill import body_pieces
+            from mocapkit.imu.streaming import spill_ximu3_device
+            from mocapkit.io.ximu3 import ximu3_sensors
+
+            # the whole path's message for a sensor the export lacks
+            tree.check_sensors(list(ximu3_sensors(path)))
+            spills = spill_ximu3_device(path, d, [s.sensor for s in tree.segments], rows)
+            try:
+                stream_body(tree, path, output=angles, calibration="auto",
+                            heading_alignment="hinges", pieces=body_pieces(spills))  # fmt: skip
+            finally:
+                for s in spills:
+                    s.close()
+        else:
+            stream_body(tree, path, output=angles, calibration="auto",
+                        heading_alignment="hinges", rows=rows)  # fmt: skip
         return _angles(angles, robot, output, rows, collisions, inertial=True)
 
 
