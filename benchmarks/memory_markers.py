@@ -11,7 +11,7 @@ resident memory. Target (issue 16): within 2x from 1 min to 1 h.
 
 ``--clean`` punches a gap into one marker every 2 s (0.1-0.4 s long, so that some stay
 open past the default ``--max-gap-s 0.25``) and adds ``--fill-gaps both --lowpass-hz 6``,
-as labs run it.
+as labs run it. ``--method ik`` / ``--mode online`` pass those options on.
 """
 
 from __future__ import annotations
@@ -58,12 +58,18 @@ def main() -> None:
         "--clean", action="store_true",
         help="gaps in the trial, filled and low-passed (--fill-gaps both --lowpass-hz 6)",
     )  # fmt: skip
+    parser.add_argument("--method", choices=("osc", "ik"), default="osc")
+    parser.add_argument("--mode", choices=("offline", "online"), default="offline")
     parser.add_argument("--write-docs", action="store_true")
     args = parser.parse_args()
     if not TRC.exists():
         raise SystemExit(f"needs {TRC}")
     exe = [sys.executable, "-c", "from mocapkit.cli.main import run; run()"]
     clean = ["--fill-gaps", "both", "--lowpass-hz", "6"] if args.clean else []
+    if args.method != "osc":
+        clean += ["--method", args.method]
+    if args.mode != "offline":
+        clean += ["--mode", args.mode]
     rows = []
     with tempfile.TemporaryDirectory() as d:
         for minutes in args.minutes:
@@ -74,16 +80,26 @@ def main() -> None:
             rows.append((minutes, frames, m))
             print(minutes, frames, m, flush=True)
     lengths = " ".join(f"{x:g}" for x in args.minutes)
-    flag = " --clean" if args.clean else ""
+    flag = (" --clean" if args.clean else "") + "".join(
+        f" --{k} {v}" for k, v in (("method", args.method), ("mode", args.mode))
+        if v not in ("osc", "offline")
+    )  # fmt: skip
     length_report(
         rows, f"python -m benchmarks.memory_markers --minutes {lengths}{flag}",
         "OpenSim's gait2392 walk played forwards and backwards to the length, 60 Hz"
         + (", a gap in one marker every 2 s (0.1-0.4 s)" if args.clean else "")
         + ", `mocapkit markers reconstruct --height-m 1.80"
         + (" --fill-gaps both --lowpass-hz 6" if args.clean else "")
-        + "`, direct marker control, whole processes",
+        + "".join(f" {c}" for c in clean if c.startswith("--m") or c in ("ik", "online"))
+        + "`, "
+        + ("inverse kinematics" if args.method == "ik" else "direct marker control")
+        + f" {args.mode if args.method == 'osc' else ''}".rstrip()
+        + ", whole processes",
         "Memory and time against recording length: markers"
-        + (", filled and filtered" if args.clean else ""), args.write_docs,
+        + (", filled and filtered" if args.clean else "")
+        + (", IK" if args.method == "ik" else "")
+        + (", online" if args.mode == "online" and args.method == "osc" else ""),
+        args.write_docs,
     )  # fmt: skip
 
 
