@@ -13,7 +13,7 @@ from mocapkit.errors import ConfigError, FileFormatError
 from mocapkit.imu.filters import make_filter
 from mocapkit.imu.resample import common_time_base, resample_orientation
 from mocapkit.imu.streaming import run_ximu3_streaming
-from mocapkit.io.opensim_table import write_table
+from mocapkit.io.opensim_table import read_table, write_table
 from mocapkit.io.ximu3 import (
     INERTIAL_COLUMNS,
     MAG_COLUMNS,
@@ -23,9 +23,10 @@ from mocapkit.io.ximu3 import (
 )
 
 
-def _export(root: Path, n: int = 700) -> Path:
+def _export(root: Path, n: int = 700, rest: int = 0) -> Path:
     """Two x-IMU3 sensors on their own clocks (100 Hz, offset and slightly fast), each
-    with a 40 Hz magnetometer that has a dropout."""
+    with a 40 Hz magnetometer that has a dropout; ``rest``: still for that many samples
+    first (a gyroscope bias of a few tenths of a deg/s)."""
     rng = np.random.default_rng(4)
     for k, (name, t0, scale) in enumerate((("Thigh", 5.000, 1.0), ("Shank", 5.013, 1.0002))):
         d = root / f"{name} 64F0EB{k:02d} (UDP)"
@@ -34,6 +35,8 @@ def _export(root: Path, n: int = 700) -> Path:
         t = t0 + scale * np.arange(n) / 100.0
         gyr = 40.0 * np.sin(np.outer(t, [1.1, 0.7, 0.3]) + k)  # deg/s
         acc = np.array([0.0, 0.0, 1.0]) + 0.05 * rng.standard_normal((n, 3))  # g
+        gyr[:rest] = [0.5 - k, -0.3, 0.2] + 0.05 * rng.standard_normal((rest, 3))
+        acc[:rest] = [0.0, 0.0, 1.0] + 0.001 * rng.standard_normal((rest, 3))
         rows = np.column_stack([np.round(t * 1e6), gyr, acc])
         np.savetxt(d / "Inertial.csv", rows, delimiter=",", fmt=["%d"] + ["%.6f"] * 6,
                    header=",".join(INERTIAL_COLUMNS), comments="")  # fmt: skip
@@ -46,9 +49,14 @@ def _export(root: Path, n: int = 700) -> Path:
     return root
 
 
-def _whole(root: Path, out: Path) -> Path:
-    """What ``imu run DIR --filter polaris`` wrote before it streamed."""
+def _whole(root: Path, out: Path, remove_gyr_bias: bool = False) -> Path:
+    """What ``imu run DIR --filter polaris [--remove-gyr-bias]`` wrote before it streamed."""
+    from mocapkit.imu.calibration import calibrate_from_rest, remove_gyro_bias
+
     recs = read_ximu3_directory(root)
+    if remove_gyr_bias:
+        recs = {k: remove_gyro_bias(r, calibrate_from_rest(r, use_mag=False).gyr_bias)
+                for k, r in recs.items()}  # fmt: skip
     series = [make_filter("polaris", r.rate_hz).run_recording(r, use_mag=True)
               for r in recs.values()]  # fmt: skip
     t = common_time_base(series)
@@ -76,6 +84,22 @@ def test_streamed_table_is_the_whole_paths(tmp_path: Path, rows: int) -> None:
     assert (tmp_path / "st.sto").read_text() == whole.read_text()
     assert rep.sensors == ["Shank", "Thigh"]
     assert rep.rows == len(whole.read_text().splitlines()) - 7
+
+
+@pytest.mark.parametrize("rows", [53, 20_000])
+def test_the_rest_bias_removed_in_pieces_as_from_the_whole(tmp_path: Path, rows: int) -> None:
+    """``imu run --remove-gyr-bias``: each sensor's first rest period found reading ahead
+    (mocapkit.imu.rest_streaming), its bias taken out of every piece."""
+    root = _export(tmp_path / "export", rest=200)
+    whole = _whole(root, tmp_path / "whole.sto", remove_gyr_bias=True)
+    plain = _whole(root, tmp_path / "plain.sto")
+    run_ximu3_streaming(root, "polaris", tmp_path / "st.sto", chunk_rows=rows,
+                        remove_gyr_bias=True)  # fmt: skip
+    # the bias summed piece by piece: the whole mean's rounding, to a unit in its last digit
+    a, b = read_table(tmp_path / "st.sto"), read_table(whole)
+    np.testing.assert_array_equal(a.time, b.time)
+    np.testing.assert_allclose(a.data, b.data, rtol=0, atol=1e-12)
+    assert np.abs(read_table(plain).data - b.data).max() > 1e-3
 
 
 def test_one_sensor_selected_keeps_its_own_clock(tmp_path: Path) -> None:

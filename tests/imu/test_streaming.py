@@ -201,3 +201,31 @@ def test_a_broad_trial_with_rows_missing_is_named(tmp_path: Path) -> None:
         f["imu_mag"] = np.zeros((400, 3))
     with pytest.raises(FileFormatError, match="imu_gyr has 500 rows, imu_acc 500, imu_mag 400"):
         list(iter_broad_imu(src))
+
+
+def test_the_rest_bias_is_removed_piece_by_piece(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``imu run FILE.csv --remove-gyr-bias`` streams: the first rest period's bias found
+    reading ahead, then taken out of every piece, as from the whole recording."""
+    from mocapkit.imu.calibration import calibrate_from_rest, remove_gyro_bias
+
+    n = 3000
+    t = np.arange(n) / 100.0
+    rng = np.random.default_rng(8)
+    gyr = np.column_stack([np.sin(0.7 * t), np.sin(1.1 * t), np.sin(0.3 * t)])
+    gyr[:300] = [0.01, -0.02, 0.005] + 0.001 * rng.normal(size=(300, 3))
+    acc = np.tile([0.0, 0.0, 9.81], (n, 1)) + 0.01 * rng.normal(size=(n, 3))
+    mag = np.tile([0.0, 20.0, -40.0], (n, 1))
+    write_imu_csv(tmp_path / "s.csv", ImuRecording(t, gyr, acc, mag, name="wrist"))
+    rec = read_imu_csv(tmp_path / "s.csv")
+    rate = next(iter_imu_csv(tmp_path / "s.csv", chunk_rows=700)).rate_hz
+    fixed = remove_gyro_bias(rec, calibrate_from_rest(rec, use_mag=False).gyr_bias)
+    whole = make_filter("polaris", rate).run_recording(fixed)
+    run_file_streaming(tmp_path / "s.csv", "polaris", tmp_path / "o.sto", chunk_rows=700,
+                       remove_gyr_bias=True)  # fmt: skip
+    np.testing.assert_allclose(read_table(tmp_path / "o.sto").data[:, 0], whole.quat, atol=1e-9)
+    rc = main(["imu", "run", str(tmp_path / "s.csv"), "--filter", "polaris", "--remove-gyr-bias",
+               "-o", str(tmp_path / "c.sto"), "--json"])  # fmt: skip
+    assert rc == 0
+    assert json.loads(capsys.readouterr().out)["streamed"] is True

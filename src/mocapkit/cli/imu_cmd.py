@@ -325,7 +325,7 @@ def _streams(args: argparse.Namespace) -> bool:
     from mocapkit.io.ximu3 import is_ximu3_sensor, ximu3_sensor_dirs
 
     path = Path(args.path)
-    if args.filter_name == DEVICE or args.remove_gyr_bias:
+    if args.filter_name == DEVICE:
         return False
     if path.is_file():
         return path.suffix.lower() in (".csv", ".hdf5", ".h5") and not args.sensor
@@ -342,14 +342,15 @@ def _run_streamed(args: argparse.Namespace) -> int:
     path = Path(args.path)
     if path.is_dir():
         rep = run_ximu3_streaming(path, args.filter_name, args.output, mode=args.mode,
-                                  params=dict(args.param), sensors=args.sensor or None)  # fmt: skip
+                                  params=dict(args.param), sensors=args.sensor or None,
+                                  remove_gyr_bias=args.remove_gyr_bias)  # fmt: skip
         for note in rep.notes:
             print(note, file=sys.stderr)
         labels = ["_".join(n.split()) for n in rep.sensors]
     else:
         run = run_file_offline if args.offline else run_file_streaming
         rep = run(path, args.filter_name, args.output, mode=args.mode,
-                  params=dict(args.param))  # fmt: skip
+                  params=dict(args.param), remove_gyr_bias=args.remove_gyr_bias)  # fmt: skip
         if rep.mag_gaps or rep.acc_rejected or rep.mag_rejected:
             print(
                 f"{rep.sensor}: {rep.mag_gaps} magnetometer gaps and {rep.mag_rejected} "

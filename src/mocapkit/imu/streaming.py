@@ -48,15 +48,34 @@ class StreamReport:
     notes: list[str] = field(default_factory=list)
 
 
-def recording_pieces(path: Path, chunk_rows: int = CHUNK_ROWS) -> Iterator[ImuRecording]:
+def recording_pieces(
+    path: Path, chunk_rows: int = CHUNK_ROWS, remove_gyr_bias: bool = False
+) -> Iterator[ImuRecording]:
     """One sensor's recording file in pieces of ``chunk_rows`` rows, read as they go: a
     mocapkit IMU CSV (:func:`~mocapkit.io.imu_csv.iter_imu_csv`) or a BROAD ``.hdf5``
-    trial (:func:`~mocapkit.io.broad.iter_broad_imu`)."""
-    if Path(path).suffix.lower() in (".hdf5", ".h5"):
-        from mocapkit.io.broad import iter_broad_imu
+    trial (:func:`~mocapkit.io.broad.iter_broad_imu`). ``remove_gyr_bias``: the bias of
+    the first rest period (read ahead until it ends) subtracted from every piece."""
 
-        return iter_broad_imu(path, chunk_rows)
-    return iter_imu_csv(path, chunk_rows=chunk_rows)
+    def read() -> Iterator[ImuRecording]:
+        if Path(path).suffix.lower() in (".hdf5", ".h5"):
+            from mocapkit.io.broad import iter_broad_imu
+
+            return iter_broad_imu(path, chunk_rows)
+        return iter_imu_csv(path, chunk_rows=chunk_rows)
+
+    return without_rest_bias(read) if remove_gyr_bias else read()
+
+
+def without_rest_bias(read: Callable[[], Iterator[ImuRecording]]) -> Iterator[ImuRecording]:
+    """The pieces ``read()`` gives, less the gyroscope bias of the recording's first rest
+    period (:func:`mocapkit.imu.rest_streaming.first_rest_bias`: ``read()`` is called
+    twice, once to find it), as ``imu run --remove-gyr-bias`` removes it from a whole
+    recording."""
+    from mocapkit.imu.calibration import remove_gyro_bias
+    from mocapkit.imu.rest_streaming import first_rest_bias
+
+    bias = first_rest_bias(read())
+    return (remove_gyro_bias(p, bias) for p in read())
 
 
 def run_file_streaming(
@@ -67,16 +86,17 @@ def run_file_streaming(
     mode: str = "9d",
     params: dict[str, Any] | None = None,
     chunk_rows: int = CHUNK_ROWS,
+    remove_gyr_bias: bool = False,
 ) -> StreamReport:
     """One sensor's file (a mocapkit IMU CSV or a BROAD .hdf5) through an online filter
     into an orientation table, piece by piece (module docstring). Time in the table starts
-    at 0 (the first sample)."""
+    at 0 (the first sample). ``remove_gyr_bias``: as :func:`recording_pieces`."""
     from mocapkit.imu.sensor_spill import filter_pieces
 
     report = StreamReport()
     writer: QuaternionTableWriter | None = None
     t0 = t_last = 0.0
-    pieces = recording_pieces(path, chunk_rows)
+    pieces = recording_pieces(path, chunk_rows, remove_gyr_bias)
     try:
         for piece, q, r in filter_pieces(pieces, filter_name, mode, params, source=path):
             if writer is None:
@@ -107,6 +127,7 @@ def run_file_offline(
     params: dict[str, Any] | None = None,
     chunk_rows: int = CHUNK_ROWS,
     workdir: str | Path | None = None,
+    remove_gyr_bias: bool = False,
 ) -> StreamReport:
     """One sensor's file (a mocapkit IMU CSV or a BROAD .hdf5) through the offline
     smoother (polaris, forward-backward) into an orientation table in bounded memory
@@ -126,8 +147,9 @@ def run_file_offline(
                                      dir=workdir or default_workdir()) as tmp:  # fmt: skip
         store = DiskStore(tmp)
         try:
-            filt, use_acc, use_mag, rate = _spill_file(path, filter_name, mode, params,
-                                                      chunk_rows, store, report)  # fmt: skip
+            filt, use_acc, use_mag, rate = _spill_file(
+                path, filter_name, mode, params, chunk_rows, store, report, remove_gyr_bias
+            )
             n = report.rows
             label = "_".join(report.sensor.split())
             t0 = float(store.read("time", 0, 1)[0, 0])
@@ -152,7 +174,7 @@ def run_file_offline(
 
 def _spill_file(
     path: Path, filter_name: str, mode: str, params: dict[str, Any] | None, chunk_rows: int,
-    store: Any, report: StreamReport,
+    store: Any, report: StreamReport, remove_gyr_bias: bool = False,
 ) -> tuple[Any, np.ndarray, np.ndarray, float]:  # fmt: skip
     """Read the file piece by piece, validate each piece as the filter would (with the
     previous piece's last gyroscope reading), and write the validated samples and their
@@ -168,7 +190,7 @@ def _spill_file(
     last_gyr: np.ndarray | None = None
     rate = 0.0
     t_last = 0.0
-    for piece in recording_pieces(path, chunk_rows):
+    for piece in recording_pieces(path, chunk_rows, remove_gyr_bias):
         if filt is None:
             check_units(piece)
             if piece.n_samples < 2:
@@ -223,6 +245,7 @@ def spill_ximu3(
     sensors: list[str] | None = None,
     chunk_rows: int = SENSOR_CHUNK_ROWS,
     report: StreamReport | None = None,
+    remove_gyr_bias: bool = False,
 ) -> list[Any]:
     """Every sensor of an x-IMU3 export (or ``sensors``, in that order) through its own
     online filter piece by piece into :class:`~mocapkit.imu.sensor_spill.SensorSpill` files
@@ -245,7 +268,11 @@ def spill_ximu3(
     try:
         for spill, d in zip(spills, dirs.values(), strict=True):
             counts = [0, 0, 0]
-            pieces = iter_ximu3_sensor(d, spill.name, rows=chunk_rows)
+
+            def read(d: Path = d, name: str = spill.name) -> Iterator[ImuRecording]:
+                return iter_ximu3_sensor(d, name, rows=chunk_rows)
+
+            pieces = without_rest_bias(read) if remove_gyr_bias else read()
             for piece, q, r in filter_pieces(pieces, filter_name, mode, params):
                 spill.append(piece.time, q)
                 counts = [
@@ -311,6 +338,7 @@ def run_ximu3_streaming(
     sensors: list[str] | None = None,
     chunk_rows: int = SENSOR_CHUNK_ROWS,
     workdir: str | Path | None = None,
+    remove_gyr_bias: bool = False,
 ) -> StreamReport:
     """An x-IMU3 export directory (one sub-directory per sensor, each on its own clock)
     through an online filter into one orientation table, in bounded memory
@@ -327,7 +355,8 @@ def run_ximu3_streaming(
     report = StreamReport()
     with tempfile.TemporaryDirectory(prefix="mocapkit-sensors-", dir=workdir) as tmp:
         spills = spill_ximu3(path, filter_name, mode, tmp, params=params, sensors=sensors,
-                             chunk_rows=chunk_rows, report=report)  # fmt: skip
+                             chunk_rows=chunk_rows, report=report,
+                             remove_gyr_bias=remove_gyr_bias)  # fmt: skip
         try:
             labels = ["_".join(s.name.split()) for s in spills]
             grid: Callable[[int, int], FloatArray]
