@@ -10,6 +10,7 @@ run DIR --filter polaris -o OUT.sto`` (online, 9D) as a whole process: every sen
 filtered piece by piece into a file on disk, then all resampled onto one time base and
 written a piece at a time (``mocapkit.imu.sensor_spill``). Reported: wall time and the
 child's peak resident memory. Target (issue 16): within 2x from 1 min to 1 h.
+``--offline``: the offline smoother instead (each sensor through files on disk).
 """
 
 from __future__ import annotations
@@ -61,26 +62,32 @@ def long_export(
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, nargs="+", default=[1.0, 10.0, 60.0])
+    parser.add_argument("--offline", action="store_true", help="the offline smoother")
     parser.add_argument("--write-docs", action="store_true")
     args = parser.parse_args()
     if not EXPORT.exists():
         raise SystemExit(f"needs {EXPORT}")
     exe = [sys.executable, "-c", "from mocapkit.cli.main import run; run()"]
+    offline = ["--offline"] if args.offline else []
     rows = []
     for minutes in args.minutes:
         with tempfile.TemporaryDirectory() as d:
             src = Path(d) / "export"
             copies = long_export(src, minutes)
             m = measure([*exe, "imu", "run", str(src), "--filter", "polaris",
-                         "-o", str(Path(d) / "out.sto")])  # fmt: skip
+                         "-o", str(Path(d) / "out.sto"), *offline])  # fmt: skip
         rows.append((minutes, copies, m))
         print(minutes, copies, m, flush=True)
     lengths = " ".join(f"{x:g}" for x in args.minutes)
     length_report(
-        rows, f"python -m benchmarks.memory_ximu3 --minutes {lengths}",
+        rows, f"python -m benchmarks.memory_ximu3 --minutes {lengths}"
+        + (" --offline" if args.offline else ""),
         "the 7-sensor x-IMU3 lower-body export repeated to the length, 50 Hz, each sensor on "
-        "its own clock; `mocapkit imu run DIR --filter polaris`, online 9D, whole processes",
-        "Memory and time against recording length: x-IMU3 export", args.write_docs,
+        "its own clock; `mocapkit imu run DIR --filter polaris"
+        + (" --offline`, offline 9D" if args.offline else "`, online 9D")
+        + ", whole processes",
+        "Memory and time against recording length: x-IMU3 export"
+        + (", offline" if args.offline else ""), args.write_docs,
         count_label="sensors x samples", count_cell=lambda c: f"7 x {c * 921}", rate=False,
     )  # fmt: skip
 

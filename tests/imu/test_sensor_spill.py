@@ -140,3 +140,30 @@ def test_cli_streams_an_export(tmp_path: Path, capsys: pytest.CaptureFixture[str
     assert out["streamed"] is True
     assert out["sensors"] == ["Shank", "Thigh"]
     assert (tmp_path / "c.sto").read_text() == whole.read_text()
+
+
+def test_offline_smoothing_of_an_export_in_pieces(tmp_path: Path) -> None:
+    """``imu run DIR --offline``: each sensor smoothed through files on disk, then
+    resampled as the whole path does."""
+    from mocapkit.imu.filters.base import recording_steps
+    from mocapkit.series import OrientationSeries
+
+    root = _export(tmp_path / "export")
+    recs = read_ximu3_directory(root)
+    series = []
+    for r in recs.values():
+        rate = next(iter_ximu3_sensor(next(root.glob(f"{r.name}*")), rows=53)).rate_hz
+        f = make_filter("polaris", rate)
+        q = f.run_offline(r.gyr, r.acc, r.mag, dt=recording_steps(r, f.params.dt))
+        series.append(OrientationSeries(r.time, q, name=r.name))
+    t = common_time_base(series)
+    want = np.stack([resample_orientation(s, t) for s in series], axis=1)
+    rep = run_ximu3_streaming(root, "polaris", tmp_path / "st.sto", chunk_rows=53,
+                              offline=True, workdir=tmp_path)  # fmt: skip
+    got = read_table(tmp_path / "st.sto")
+    np.testing.assert_allclose(got.time, t - t[0], atol=1e-9)
+    np.testing.assert_allclose(got.data, want, rtol=0, atol=1e-9)
+    assert rep.rows == len(t)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["export", "st.sto"]
+    with pytest.raises(ConfigError, match="has no offline mode"):
+        run_ximu3_streaming(root, "bachmann", tmp_path / "b.sto", offline=True)

@@ -319,9 +319,9 @@ def _run(args: argparse.Namespace) -> int:
 
 def _streams(args: argparse.Namespace) -> bool:
     """Read, filtered and written piece by piece: one mocapkit IMU CSV or BROAD .hdf5
-    trial (online, or smoothed offline through files on disk), or an x-IMU3 export
-    (online: every sensor on its own clock through files on disk, then resampled onto one
-    time base)."""
+    trial (online, or smoothed offline through files on disk), or an x-IMU3 export (every
+    sensor on its own clock through files on disk, online or smoothed, then resampled onto
+    one time base)."""
     from mocapkit.io.ximu3 import is_ximu3_sensor, ximu3_sensor_dirs
 
     path = Path(args.path)
@@ -329,11 +329,7 @@ def _streams(args: argparse.Namespace) -> bool:
         return False
     if path.is_file():
         return path.suffix.lower() in (".csv", ".hdf5", ".h5") and not args.sensor
-    return (
-        path.is_dir()
-        and not args.offline
-        and (is_ximu3_sensor(path) or bool(ximu3_sensor_dirs(path)))
-    )
+    return path.is_dir() and (is_ximu3_sensor(path) or bool(ximu3_sensor_dirs(path)))
 
 
 def _run_streamed(args: argparse.Namespace) -> int:
@@ -343,7 +339,8 @@ def _run_streamed(args: argparse.Namespace) -> int:
     if path.is_dir():
         rep = run_ximu3_streaming(path, args.filter_name, args.output, mode=args.mode,
                                   params=dict(args.param), sensors=args.sensor or None,
-                                  remove_gyr_bias=args.remove_gyr_bias)  # fmt: skip
+                                  remove_gyr_bias=args.remove_gyr_bias,
+                                  offline=args.offline)  # fmt: skip
         for note in rep.notes:
             print(note, file=sys.stderr)
         labels = ["_".join(n.split()) for n in rep.sensors]

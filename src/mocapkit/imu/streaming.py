@@ -17,7 +17,7 @@ the same numbers as in memory), and each smoothed piece is appended to the table
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -134,6 +134,34 @@ def run_file_offline(
     (module docstring): ``chunk_rows`` samples in memory at a time, ~400 bytes a sample on
     disk in ``workdir`` (default
     :func:`~mocapkit.imu.filters.polaris_offline_chunks.default_workdir`) while it runs."""
+    report = StreamReport()
+    pieces = recording_pieces(path, chunk_rows, remove_gyr_bias)
+    writer: QuaternionTableWriter | None = None
+    t0 = 0.0
+    try:
+        for t, q, rate in smoothed_pieces(pieces, path, filter_name, mode, params, chunk_rows,
+                                          workdir, report):  # fmt: skip
+            if writer is None:
+                t0 = float(t[0])
+                label = "_".join(report.sensor.split())
+                writer = QuaternionTableWriter(output, [label], rate, path.stem)
+            writer.write(t - t0, q[:, None, :])
+            report.chunks += 1
+    finally:
+        if writer is not None:
+            writer.close()
+    return report
+
+
+def smoothed_pieces(
+    pieces: Iterable[ImuRecording], source: str | Path, filter_name: str, mode: str,
+    params: dict[str, Any] | None, chunk_rows: int, workdir: str | Path | None,
+    report: StreamReport,
+) -> Iterator[tuple[FloatArray, FloatArray, float]]:  # fmt: skip
+    """One sensor's pieces through the offline smoother in bounded memory: the validated
+    samples to files in a temporary directory in ``workdir``, then the smoother's passes
+    piece by piece (:mod:`mocapkit.imu.filters.polaris_offline_chunks`); yields
+    ``(t (n,), q (n, 4), rate [Hz])``. ``report`` tallies the rows and rejections."""
     import tempfile
 
     from mocapkit.imu.filters.polaris_offline_chunks import (
@@ -142,41 +170,33 @@ def run_file_offline(
         smooth_pieces,
     )
 
-    report = StreamReport()
     with tempfile.TemporaryDirectory(prefix="mocapkit-smooth-",
                                      dir=workdir or default_workdir()) as tmp:  # fmt: skip
         store = DiskStore(tmp)
         try:
-            filt, use_acc, use_mag, rate = _spill_file(
-                path, filter_name, mode, params, chunk_rows, store, report, remove_gyr_bias
+            filt, use_acc, use_mag, rate = _spill_pieces(
+                pieces, source, filter_name, mode, params, store, report
             )
-            n = report.rows
-            label = "_".join(report.sensor.split())
-            t0 = float(store.read("time", 0, 1)[0, 0])
-            with QuaternionTableWriter(output, [label], rate, path.stem) as writer:
-                for piece in smooth_pieces(filt.params, store, n, use_acc, use_mag,
-                                           mode == "9d", chunk_rows):  # fmt: skip
-                    q = piece.q9 if piece.q9 is not None else piece.q6
-                    bad = ~np.isfinite(q).all(axis=1)
-                    if bad.any():  # a kernel bug must never reach the user as NaN
-                        raise DataError(
-                            f"polaris: non-finite orientation at sample "
-                            f"{piece.start + int(np.flatnonzero(bad)[0])}; this is a bug, "
-                            "please report it with the input"
-                        )
-                    t = store.read("time", piece.start, piece.stop)[:, 0] - t0
-                    writer.write(t, q[:, None, :])
-                    report.chunks += 1
+            for piece in smooth_pieces(filt.params, store, report.rows, use_acc, use_mag,
+                                       mode == "9d", chunk_rows):  # fmt: skip
+                q = piece.q9 if piece.q9 is not None else piece.q6
+                bad = ~np.isfinite(q).all(axis=1)
+                if bad.any():  # a kernel bug must never reach the user as NaN
+                    raise DataError(
+                        f"polaris: non-finite orientation at sample "
+                        f"{piece.start + int(np.flatnonzero(bad)[0])}; this is a bug, "
+                        "please report it with the input"
+                    )
+                yield store.read("time", piece.start, piece.stop)[:, 0], q, rate
         finally:
             store.close()
-    return report
 
 
-def _spill_file(
-    path: Path, filter_name: str, mode: str, params: dict[str, Any] | None, chunk_rows: int,
-    store: Any, report: StreamReport, remove_gyr_bias: bool = False,
+def _spill_pieces(
+    pieces: Iterable[ImuRecording], source: str | Path, filter_name: str, mode: str,
+    params: dict[str, Any] | None, store: Any, report: StreamReport,
 ) -> tuple[Any, np.ndarray, np.ndarray, float]:  # fmt: skip
-    """Read the file piece by piece, validate each piece as the filter would (with the
+    """Read the pieces in turn, validate each piece as the filter would (with the
     previous piece's last gyroscope reading), and write the validated samples and their
     time to ``store``. Returns the filter, the accelerometer and magnetometer flags (N,)
     and the rate [Hz]."""
@@ -190,12 +210,12 @@ def _spill_file(
     last_gyr: np.ndarray | None = None
     rate = 0.0
     t_last = 0.0
-    for piece in recording_pieces(path, chunk_rows, remove_gyr_bias):
+    for piece in pieces:
         if filt is None:
             check_units(piece)
             if piece.n_samples < 2:
                 raise ConfigError(
-                    f"{path}: {piece.n_samples} data row: at least 2 are needed to know "
+                    f"{source}: {piece.n_samples} data row: at least 2 are needed to know "
                     "the sampling rate"
                 )
             filt = check_offline(make_filter(filter_name, piece.rate_hz, **(params or {})),
@@ -223,7 +243,7 @@ def _spill_file(
         t_last = float(piece.time[-1])
         report.rows += piece.n_samples
     if filt is None:
-        raise DataError(f"{path}: no samples")
+        raise DataError(f"{source}: no samples")
     report.time_span = (report.time_span[0], t_last)
     return filt, np.concatenate(flags_acc), np.concatenate(flags_mag), rate
 
@@ -246,11 +266,13 @@ def spill_ximu3(
     chunk_rows: int = SENSOR_CHUNK_ROWS,
     report: StreamReport | None = None,
     remove_gyr_bias: bool = False,
+    offline: bool = False,
 ) -> list[Any]:
     """Every sensor of an x-IMU3 export (or ``sensors``, in that order) through its own
-    online filter piece by piece into :class:`~mocapkit.imu.sensor_spill.SensorSpill` files
-    in ``directory``; ``report`` tallies what the filters rejected, per sensor in
-    ``notes``."""
+    online filter piece by piece (``offline``: the offline smoother, through files on disk
+    in ``directory``, :func:`smoothed_pieces`) into
+    :class:`~mocapkit.imu.sensor_spill.SensorSpill` files in ``directory``; ``report``
+    tallies what the filters rejected, per sensor in ``notes``."""
     from mocapkit.imu.sensor_spill import SensorSpill, filter_pieces
     from mocapkit.io.ximu3 import iter_ximu3_sensor, ximu3_sensors
 
@@ -273,7 +295,15 @@ def spill_ximu3(
                 return iter_ximu3_sensor(d, name, rows=chunk_rows)
 
             pieces = without_rest_bias(read) if remove_gyr_bias else read()
-            for piece, q, r in filter_pieces(pieces, filter_name, mode, params):
+            if offline:
+                one = StreamReport()
+                for t, q, _ in smoothed_pieces(pieces, d, filter_name, mode, params,
+                                               chunk_rows, directory, one):  # fmt: skip
+                    spill.append(t, q)
+                    rep.chunks += 1
+                counts = [one.mag_gaps, one.mag_rejected, one.acc_rejected]
+            for piece, q, r in ([] if offline else
+                                filter_pieces(pieces, filter_name, mode, params)):  # fmt: skip
                 spill.append(piece.time, q)
                 counts = [
                     c + x
@@ -339,6 +369,7 @@ def run_ximu3_streaming(
     chunk_rows: int = SENSOR_CHUNK_ROWS,
     workdir: str | Path | None = None,
     remove_gyr_bias: bool = False,
+    offline: bool = False,
 ) -> StreamReport:
     """An x-IMU3 export directory (one sub-directory per sensor, each on its own clock)
     through an online filter into one orientation table, in bounded memory
@@ -356,7 +387,7 @@ def run_ximu3_streaming(
     with tempfile.TemporaryDirectory(prefix="mocapkit-sensors-", dir=workdir) as tmp:
         spills = spill_ximu3(path, filter_name, mode, tmp, params=params, sensors=sensors,
                              chunk_rows=chunk_rows, report=report,
-                             remove_gyr_bias=remove_gyr_bias)  # fmt: skip
+                             remove_gyr_bias=remove_gyr_bias, offline=offline)  # fmt: skip
         try:
             labels = ["_".join(s.name.split()) for s in spills]
             grid: Callable[[int, int], FloatArray]
