@@ -226,12 +226,22 @@ def test_cli_streams_raw_samples_of_an_export(
     assert main([*base, "-o", str(tmp_path / "st.mot")]) == 0
     streamed_run = json.loads(capsys.readouterr().out)
     assert streamed_run["streamed"] is True
-    # --start makes it read the whole recording (the whole path crops before aligning)
-    assert main([*base, "--start", "0", "-o", str(tmp_path / "wh.mot")]) == 0
-    assert json.loads(capsys.readouterr().out)["streamed"] is False
-    a = read_joint_angles_mot(tmp_path / "st.mot")
-    b = read_joint_angles_mot(tmp_path / "wh.mot")
-    np.testing.assert_allclose(a.values, b.values, atol=1e-8)
+    # --start/--stop stream too: the filters run over the whole recording, then each
+    # sensor is cropped before the sensors are aligned, as the whole path does
+    assert main([*base, "--start", "100.4", "--stop", "111", "-o", str(tmp_path / "cr.mot")]) == 0
+    assert json.loads(capsys.readouterr().out)["streamed"] is True
+    from mocapkit.body.recordings import read_raw, run_filter
+
+    tree = SensorTree.preset("lower_body")
+    oris = run_filter(read_raw(root, "device"), "polaris-body", "9d")
+    whole = run_body(tree, oris, start=100.4, stop=111.0, heading_alignment="hinges")
+    a = read_joint_angles_mot(tmp_path / "cr.mot")
+    assert a.time[0] >= 100.4
+    assert a.time[-1] <= 111.0
+    np.testing.assert_array_equal(a.time, np.round(whole.body.angles.time, 6))
+    np.testing.assert_allclose(a.values, whole.body.angles.values, atol=1e-8)
+    assert main([*base, "--start", "500", "-o", str(tmp_path / "none.mot")]) != 0
+    assert "fewer than 2 samples between 500.0 and None s" in capsys.readouterr().err
     # a tree sensor the export lacks: the whole path's message, nothing written
     assert main([*base, "--map", "pelvis=Hips", "-o", str(tmp_path / "x.mot")]) != 0
     assert "no data for sensor(s) pelvis <- 'Hips'" in capsys.readouterr().err

@@ -81,10 +81,11 @@ def _stream_raw(tree: Any, args: argparse.Namespace, options: dict[str, Any]) ->
 
     # the whole path's message for a sensor the export lacks
     tree.check_sensors(list(ximu3_sensors(Path(args.recording))))
+    crop = (options.get("start"), options.get("stop"))  # cropped as the sensors are spilled
     options = {k: v for k, v in options.items() if k not in ("start", "stop")}
     with tempfile.TemporaryDirectory(prefix="mocapkit-body-") as tmp:
         spills = spill_ximu3(Path(args.recording), args.filter, args.mode, tmp,
-                             sensors=[s.sensor for s in tree.segments])  # fmt: skip
+                             sensors=[s.sensor for s in tree.segments], crop=crop)  # fmt: skip
         try:
             return stream_body(tree, args.recording, output=args.output,
                                segments_output=args.segments, pieces=body_pieces(spills),
@@ -119,7 +120,7 @@ def _cmd_angles(args: argparse.Namespace) -> int:
     # nothing needs the whole recording: filtered, aligned and turned into angles in pieces
     raw_streamed = (
         bool(args.filter) and _is_ximu3(Path(args.recording)) and not args.bvh
-        and alignment != "joints" and args.start is None and args.stop is None
+        and alignment != "joints"
     )  # fmt: skip
     streamed = streamed or raw_streamed
     raw = None

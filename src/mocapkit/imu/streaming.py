@@ -267,12 +267,15 @@ def spill_ximu3(
     report: StreamReport | None = None,
     remove_gyr_bias: bool = False,
     offline: bool = False,
+    crop: tuple[float | None, float | None] = (None, None),
 ) -> list[Any]:
     """Every sensor of an x-IMU3 export (or ``sensors``, in that order) through its own
     online filter piece by piece (``offline``: the offline smoother, through files on disk
     in ``directory``, :func:`smoothed_pieces`) into
     :class:`~mocapkit.imu.sensor_spill.SensorSpill` files in ``directory``; ``report``
-    tallies what the filters rejected, per sensor in ``notes``."""
+    tallies what the filters rejected, per sensor in ``notes``. ``crop``: (start, stop)
+    [s], only the orientations between them are kept (the filters run over the whole
+    recording first, as ``body angles --start/--stop`` does)."""
     from mocapkit.imu.sensor_spill import SensorSpill, filter_pieces
     from mocapkit.io.ximu3 import iter_ximu3_sensor, ximu3_sensors
 
@@ -287,9 +290,18 @@ def spill_ximu3(
     rep = report if report is not None else StreamReport()
     rep.sensor, rep.sensors = ", ".join(dirs), list(dirs)
     spills = [SensorSpill(directory, name, i) for i, name in enumerate(dirs)]
+    lo = -np.inf if crop[0] is None else crop[0]
+    hi = np.inf if crop[1] is None else crop[1]
     try:
         for spill, d in zip(spills, dirs.values(), strict=True):
             counts = [0, 0, 0]
+            span = [np.inf, -np.inf]
+
+            def keep(t: FloatArray, q: FloatArray, spill: Any = spill, span: Any = span) -> None:
+                if len(t):
+                    span[0], span[1] = min(span[0], float(t[0])), float(t[-1])
+                inside = (t >= lo) & (t <= hi)
+                spill.append(t[inside], q[inside])
 
             def read(d: Path = d, name: str = spill.name) -> Iterator[ImuRecording]:
                 return iter_ximu3_sensor(d, name, rows=chunk_rows)
@@ -299,12 +311,12 @@ def spill_ximu3(
                 one = StreamReport()
                 for t, q, _ in smoothed_pieces(pieces, d, filter_name, mode, params,
                                                chunk_rows, directory, one):  # fmt: skip
-                    spill.append(t, q)
+                    keep(t, q)
                     rep.chunks += 1
                 counts = [one.mag_gaps, one.mag_rejected, one.acc_rejected]
             for piece, q, r in ([] if offline else
                                 filter_pieces(pieces, filter_name, mode, params)):  # fmt: skip
-                spill.append(piece.time, q)
+                keep(piece.time, q)
                 counts = [
                     c + x
                     for c, x in zip(
@@ -312,6 +324,11 @@ def spill_ximu3(
                     )
                 ]
                 rep.chunks += 1
+            if spill.n < 2:  # as body.pipeline.crop says it
+                raise DataError(
+                    f"sensor {spill.name!r}: fewer than 2 samples between {crop[0]} and "
+                    f"{crop[1]} s (recording {span[0]:.3f}-{span[1]:.3f} s)"
+                )
             rep.mag_gaps += counts[0]
             rep.mag_rejected += counts[1]
             rep.acc_rejected += counts[2]
