@@ -246,3 +246,24 @@ def test_cli_streams_raw_samples_of_an_export(
     assert main([*base, "--map", "pelvis=Hips", "-o", str(tmp_path / "x.mot")]) != 0
     assert "no data for sensor(s) pelvis <- 'Hips'" in capsys.readouterr().err
     assert not (tmp_path / "x.mot").exists()
+
+
+def test_cli_streams_an_exports_device_orientations(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Without --filter, an x-IMU3 export's own orientations (Quaternion.csv) go through
+    in pieces too, cropped per sensor before they are aligned, as the whole path does."""
+    from mocapkit.body.recordings import load_orientations
+    from mocapkit.cli.main import main
+    from tests.retarget.test_streamed import _ximu3_export as device_export
+
+    root = device_export(tmp_path, seconds=12.0)
+    tree = SensorTree.preset("lower_body")
+    argv = ["body", "angles", str(root), "--preset", "lower_body", "--start", "0",
+            "--stop", "10", "-o", str(tmp_path / "st.mot"), "--json"]  # fmt: skip
+    assert main(argv) == 0
+    assert json.loads(capsys.readouterr().out)["streamed"] is True
+    whole = run_body(tree, load_orientations(root), start=0.0, stop=10.0)
+    a = read_joint_angles_mot(tmp_path / "st.mot")
+    assert a.names == whole.body.angles.names
+    np.testing.assert_allclose(a.values, whole.body.angles.values, atol=1e-8)

@@ -69,14 +69,15 @@ def _is_ximu3(path: Path) -> bool:
 
 
 def _stream_raw(tree: Any, args: argparse.Namespace, options: dict[str, Any]) -> Any:
-    """An x-IMU3 export's raw samples through ``--filter`` into the body model, piece by
-    piece: each sensor filtered into a file on disk, then all aligned onto one time base
+    """An x-IMU3 export into the body model, piece by piece: each sensor's raw samples
+    through ``--filter`` (or, without one, its device orientations) into a file on disk,
+    cropped to ``--start/--stop``, then all aligned onto one time base
     (:mod:`mocapkit.imu.sensor_spill`) and streamed through :func:`stream_body`."""
     import tempfile
 
     from mocapkit.body.streamed import stream_body
     from mocapkit.imu.sensor_spill import body_pieces
-    from mocapkit.imu.streaming import spill_ximu3
+    from mocapkit.imu.streaming import spill_ximu3, spill_ximu3_device
     from mocapkit.io.ximu3 import ximu3_sensors
 
     # the whole path's message for a sensor the export lacks
@@ -84,8 +85,12 @@ def _stream_raw(tree: Any, args: argparse.Namespace, options: dict[str, Any]) ->
     crop = (options.get("start"), options.get("stop"))  # cropped as the sensors are spilled
     options = {k: v for k, v in options.items() if k not in ("start", "stop")}
     with tempfile.TemporaryDirectory(prefix="mocapkit-body-") as tmp:
-        spills = spill_ximu3(Path(args.recording), args.filter, args.mode, tmp,
-                             sensors=[s.sensor for s in tree.segments], crop=crop)  # fmt: skip
+        sensors = [s.sensor for s in tree.segments]
+        if args.filter:
+            spills = spill_ximu3(Path(args.recording), args.filter, args.mode, tmp,
+                                 sensors=sensors, crop=crop)  # fmt: skip
+        else:
+            spills = spill_ximu3_device(Path(args.recording), tmp, sensors, crop=crop)
         try:
             return stream_body(tree, args.recording, output=args.output,
                                segments_output=args.segments, pieces=body_pieces(spills),
@@ -118,9 +123,10 @@ def _cmd_angles(args: argparse.Namespace) -> int:
     )  # fmt: skip
     # raw samples of an x-IMU3 export (sensors on their own clocks) through a filter, when
     # nothing needs the whole recording: filtered, aligned and turned into angles in pieces
+    # (without --filter: the devices' own orientations, in the same pieces)
     raw_streamed = (
-        bool(args.filter) and _is_ximu3(Path(args.recording)) and not args.bvh
-        and alignment != "joints"
+        _is_ximu3(Path(args.recording)) and not args.bvh
+        and (alignment != "joints" or bool(args.calibration_in))
     )  # fmt: skip
     streamed = streamed or raw_streamed
     raw = None

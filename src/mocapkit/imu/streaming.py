@@ -290,18 +290,10 @@ def spill_ximu3(
     rep = report if report is not None else StreamReport()
     rep.sensor, rep.sensors = ", ".join(dirs), list(dirs)
     spills = [SensorSpill(directory, name, i) for i, name in enumerate(dirs)]
-    lo = -np.inf if crop[0] is None else crop[0]
-    hi = np.inf if crop[1] is None else crop[1]
     try:
         for spill, d in zip(spills, dirs.values(), strict=True):
             counts = [0, 0, 0]
-            span = [np.inf, -np.inf]
-
-            def keep(t: FloatArray, q: FloatArray, spill: Any = spill, span: Any = span) -> None:
-                if len(t):
-                    span[0], span[1] = min(span[0], float(t[0])), float(t[-1])
-                inside = (t >= lo) & (t <= hi)
-                spill.append(t[inside], q[inside])
+            keep = _cropper(spill, crop)
 
             def read(d: Path = d, name: str = spill.name) -> Iterator[ImuRecording]:
                 return iter_ximu3_sensor(d, name, rows=chunk_rows)
@@ -324,11 +316,7 @@ def spill_ximu3(
                     )
                 ]
                 rep.chunks += 1
-            if spill.n < 2:  # as body.pipeline.crop says it
-                raise DataError(
-                    f"sensor {spill.name!r}: fewer than 2 samples between {crop[0]} and "
-                    f"{crop[1]} s (recording {span[0]:.3f}-{span[1]:.3f} s)"
-                )
+            keep.check()
             rep.mag_gaps += counts[0]
             rep.mag_rejected += counts[1]
             rep.acc_rejected += counts[2]
@@ -345,13 +333,14 @@ def spill_ximu3(
 
 
 def spill_ximu3_device(
-    path: Path, directory: str | Path, sensors: list[str], chunk_rows: int = SENSOR_CHUNK_ROWS
-) -> list[Any]:
+    path: Path, directory: str | Path, sensors: list[str], chunk_rows: int = SENSOR_CHUNK_ROWS,
+    crop: tuple[float | None, float | None] = (None, None),
+) -> list[Any]:  # fmt: skip
     """The devices' own orientations (``Quaternion.csv``, ENU, as
     :func:`~mocapkit.io.ximu3.read_ximu3_quaternion`) of the x-IMU3 export's ``sensors``
     (by name, in that order) into :class:`~mocapkit.imu.sensor_spill.SensorSpill` files in
-    ``directory``, read ``chunk_rows`` rows at a time. A sensor without a name in the
-    export is refused naming the ones it has."""
+    ``directory``, read ``chunk_rows`` rows at a time; ``crop`` as :func:`spill_ximu3`. A
+    sensor without a name in the export is refused naming the ones it has."""
     from mocapkit.geometry import quat_mul
     from mocapkit.imu.sensor_spill import SensorSpill
     from mocapkit.io.ximu3 import Q_ENU_NWU, QUAT_COLUMNS, _blocks, ximu3_sensors
@@ -366,13 +355,39 @@ def spill_ximu3_device(
             quat_file = dirs[spill.name] / "Quaternion.csv"
             if not quat_file.is_file():
                 raise DataError(f"{dirs[spill.name]}: no Quaternion.csv in this x-IMU3 export")
+            keep = _cropper(spill, crop)
             for data in _blocks(quat_file, QUAT_COLUMNS, chunk_rows):
-                spill.append(data[:, 0] * 1e-6, quat_mul(Q_ENU_NWU, data[:, 1:5]))
+                keep(data[:, 0] * 1e-6, quat_mul(Q_ENU_NWU, data[:, 1:5]))
+            keep.check()
     except BaseException:
         for s in spills:
             s.close()
         raise
     return spills
+
+
+class _cropper:
+    """Appends a sensor's orientations to its spill, only those with ``start <= t <=
+    stop``; :meth:`check` then refuses fewer than two, as ``body.pipeline.crop`` does."""
+
+    def __init__(self, spill: Any, crop: tuple[float | None, float | None]) -> None:
+        self.spill, self.crop = spill, crop
+        self.lo = -np.inf if crop[0] is None else crop[0]
+        self.hi = np.inf if crop[1] is None else crop[1]
+        self.span = [np.inf, -np.inf]
+
+    def __call__(self, t: FloatArray, q: FloatArray) -> None:
+        if len(t):
+            self.span = [min(self.span[0], float(t[0])), float(t[-1])]
+        inside = (t >= self.lo) & (t <= self.hi)
+        self.spill.append(t[inside], q[inside])
+
+    def check(self) -> None:
+        if self.spill.n < 2:
+            raise DataError(
+                f"sensor {self.spill.name!r}: fewer than 2 samples between {self.crop[0]} "
+                f"and {self.crop[1]} s (recording {self.span[0]:.3f}-{self.span[1]:.3f} s)"
+            )
 
 
 def run_ximu3_streaming(
