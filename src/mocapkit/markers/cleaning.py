@@ -46,6 +46,11 @@ class CleaningReport:
     lowpass_hz: float | None = None
     unfiltered_runs: list[tuple[str, int, int]] = field(default_factory=list)
 
+    def open_in_order(self) -> None:
+        """``left_open`` in the order the gaps were found (marker by marker, in time)."""
+        rank = {g: i for i, g in enumerate(self.gaps_found)}
+        self.left_open.sort(key=rank.__getitem__)
+
     def summary(self) -> dict[str, object]:
         return {
             "gaps_found": len(self.gaps_found),
@@ -115,6 +120,40 @@ def _rigid_fill_gap(pos: FloatArray, m: int, donors: Sequence[int], gap: Gap) ->
     return True
 
 
+def fill_candidates(
+    report: CleaningReport,
+    n: int,
+    rate: float,
+    method: str,
+    max_gap_s: float,
+    clusters: Mapping[str, Sequence[str]] | None,
+    names: Sequence[str],
+) -> list[tuple[Gap, int, list[int]]]:
+    """The gaps of ``report.gaps_found`` a fill may close, in order, each with its
+    marker's column and its rigid-cluster donors (empty: no rigid fill); the others (edge
+    gaps, gaps longer than ``max_gap_s``, everything with ``method="none"``) go to
+    ``report.left_open``. Shared by the whole-trial and the piecewise fills."""
+    if method not in ("none", "rigid", "spline", "both"):
+        raise ConfigError(f"fill method: expected none, rigid, spline or both, got {method!r}")
+    if not max_gap_s >= 0:
+        raise ConfigError(f"max_gap_s: expected >= 0, got {max_gap_s}")
+    max_frames = int(np.floor(max_gap_s * rate + 1e-9))
+    index = {nm: i for i, nm in enumerate(names)}
+    out = []
+    for gap in report.gaps_found:
+        interior = gap.start > 0 and gap.stop < n
+        if method == "none" or not interior or gap.length > max_frames:
+            report.left_open.append(gap)
+            continue
+        donors = []
+        if method in ("rigid", "both") and clusters:
+            donors = [
+                index[d] for d in clusters.get(gap.marker, ()) if d in index and d != gap.marker
+            ]
+        out.append((gap, index[gap.marker], donors))
+    return out
+
+
 def fill_gaps(
     traj: MarkerTrajectories,
     method: str = "both",
@@ -128,28 +167,15 @@ def fill_gaps(
             ``"none"`` (only report).
         clusters: marker -> markers rigidly attached to it (same segment), for the rigid fill.
     """
-    if method not in ("none", "rigid", "spline", "both"):
-        raise ConfigError(f"fill method: expected none, rigid, spline or both, got {method!r}")
-    if not max_gap_s >= 0:
-        raise ConfigError(f"max_gap_s: expected >= 0, got {max_gap_s}")
     report = CleaningReport()
     report.gaps_found, report.never_visible = find_gaps(traj)
+    todo = fill_candidates(report, traj.n_frames, traj.rate_hz, method, max_gap_s, clusters,
+                           traj.names)  # fmt: skip
     pos = traj.positions.copy()
-    max_frames = int(np.floor(max_gap_s * traj.rate_hz + 1e-9))
-    index = {n: i for i, n in enumerate(traj.names)}
-    for gap in report.gaps_found:
-        interior = gap.start > 0 and gap.stop < traj.n_frames
-        if method == "none" or not interior or gap.length > max_frames:
-            report.left_open.append(gap)
+    for gap, m, donors in todo:
+        if len(donors) >= 3 and _rigid_fill_gap(pos, m, donors, gap):
+            report.filled_rigid.append(gap)
             continue
-        m = index[gap.marker]
-        if method in ("rigid", "both") and clusters:
-            donors = [
-                index[d] for d in clusters.get(gap.marker, ()) if d in index and d != gap.marker
-            ]
-            if len(donors) >= 3 and _rigid_fill_gap(pos, m, donors, gap):
-                report.filled_rigid.append(gap)
-                continue
         if method in ("spline", "both"):
             good = np.isfinite(pos[:, m, 0])
             if good.sum() >= 4:
@@ -160,6 +186,7 @@ def fill_gaps(
                 report.filled_spline.append(gap)
                 continue
         report.left_open.append(gap)
+    report.open_in_order()
     cleaned = traj.with_positions(pos, {"cleaning": report.summary()})
     return cleaned, report
 

@@ -32,7 +32,13 @@ import numpy as np
 from mocapkit._spill import RowFile
 from mocapkit._validate import FloatArray
 from mocapkit.errors import ConfigError
-from mocapkit.markers.cleaning import CleaningReport, Gap, _rigid_fill_gap, _runs
+from mocapkit.markers.cleaning import (
+    CleaningReport,
+    Gap,
+    _rigid_fill_gap,
+    _runs,
+    fill_candidates,
+)
 
 #: visible samples either side of a gap that its spline fill sees (module docstring)
 SPLINE_KNOTS = 64
@@ -128,32 +134,16 @@ def fill_gaps_spilled(
 ) -> CleaningReport:
     """:func:`mocapkit.markers.cleaning.fill_gaps` on the file, in place (module
     docstring); the same report."""
-    if method not in ("none", "rigid", "spline", "both"):
-        raise ConfigError(f"fill method: expected none, rigid, spline or both, got {method!r}")
-    if not max_gap_s >= 0:
-        raise ConfigError(f"max_gap_s: expected >= 0, got {max_gap_s}")
     report = CleaningReport()
     report.gaps_found, report.never_visible = find_gaps_spilled(positions, n, names, chunk)
-    max_frames = int(np.floor(max_gap_s * rate + 1e-9))
-    index = {nm: i for i, nm in enumerate(names)}
-    for gap in report.gaps_found:
-        interior = gap.start > 0 and gap.stop < n
-        if method == "none" or not interior or gap.length > max_frames:
-            report.left_open.append(gap)
-            continue
-        m = index[gap.marker]
-        if method in ("rigid", "both") and clusters:
-            donors = [
-                index[d] for d in clusters.get(gap.marker, ()) if d in index and d != gap.marker
-            ]
-            if len(donors) >= 3:
-                lo, hi = gap.start - 1, gap.stop + 1
-                pos = positions.read(lo, hi)
-                local = Gap(gap.marker, gap.start - lo, gap.stop - lo)
-                if _rigid_fill_gap(pos, m, donors, local):
-                    positions.write(gap.start, pos[1:-1])
-                    report.filled_rigid.append(gap)
-                    continue
+    for gap, m, donors in fill_candidates(report, n, rate, method, max_gap_s, clusters, names):
+        if len(donors) >= 3:
+            lo, hi = gap.start - 1, gap.stop + 1
+            pos = positions.read(lo, hi)
+            if _rigid_fill_gap(pos, m, donors, Gap(gap.marker, gap.start - lo, gap.stop - lo)):
+                positions.write(gap.start, pos[1:-1])
+                report.filled_rigid.append(gap)
+                continue
         if method in ("spline", "both"):
             t_good, x_good = _side_samples(times, positions, m, gap.start, gap.stop, n)
             if len(t_good) >= 4:
@@ -166,6 +156,7 @@ def fill_gaps_spilled(
                 report.filled_spline.append(gap)
                 continue
         report.left_open.append(gap)
+    report.open_in_order()
     return report
 
 
