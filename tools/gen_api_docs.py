@@ -43,6 +43,7 @@ MODULES = (
     "mocapkit.series",
     "mocapkit.imu.filters",
     "mocapkit.imu.streaming",
+    "mocapkit.imu.sensor_streams",
     "mocapkit.body.sensor_tree",
     "mocapkit.body.pipeline",
     "mocapkit.body.kinematics",

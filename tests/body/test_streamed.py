@@ -193,12 +193,12 @@ def test_raw_samples_streamed_equal_the_whole_recording(tmp_path: Path) -> None:
     turned into angles piece by piece, against the whole path (run_filter, run_body)."""
     from mocapkit.body.recordings import read_raw, run_filter
     from mocapkit.imu.sensor_spill import body_pieces
-    from mocapkit.imu.streaming import spill_ximu3
+    from mocapkit.imu.sensor_streams import spill_filtered
 
     tree, root = _ximu3_export(tmp_path)
     whole = run_body(tree, run_filter(read_raw(root, "device"), "polaris-body", "9d"))
     write_joint_angles_mot(tmp_path / "whole.mot", whole.body.angles)
-    spills = spill_ximu3(root, "polaris-body", "9d", tmp_path, chunk_rows=211,
+    spills = spill_filtered(root, "polaris-body", "9d", tmp_path, chunk_rows=211,
                          sensors=[s.sensor for s in tree.segments])  # fmt: skip
     try:
         done = streamed.stream_body(tree, root, output=tmp_path / "piece.mot",

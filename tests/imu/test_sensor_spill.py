@@ -12,7 +12,7 @@ import pytest
 from mocapkit.errors import ConfigError, FileFormatError
 from mocapkit.imu.filters import make_filter
 from mocapkit.imu.resample import common_time_base, resample_orientation
-from mocapkit.imu.streaming import run_ximu3_streaming
+from mocapkit.imu.sensor_streams import run_sensors_streaming
 from mocapkit.io.opensim_table import read_table, write_table
 from mocapkit.io.ximu3 import (
     INERTIAL_COLUMNS,
@@ -80,7 +80,7 @@ def test_pieces_of_a_sensor_equal_the_whole_reader(tmp_path: Path) -> None:
 def test_streamed_table_is_the_whole_paths(tmp_path: Path, rows: int) -> None:
     root = _export(tmp_path / "export")
     whole = _whole(root, tmp_path / "whole.sto")
-    rep = run_ximu3_streaming(root, "polaris", tmp_path / "st.sto", chunk_rows=rows)
+    rep = run_sensors_streaming(root, "polaris", tmp_path / "st.sto", chunk_rows=rows)
     assert (tmp_path / "st.sto").read_text() == whole.read_text()
     assert rep.sensors == ["Shank", "Thigh"]
     assert rep.rows == len(whole.read_text().splitlines()) - 7
@@ -93,7 +93,7 @@ def test_the_rest_bias_removed_in_pieces_as_from_the_whole(tmp_path: Path, rows:
     root = _export(tmp_path / "export", rest=200)
     whole = _whole(root, tmp_path / "whole.sto", remove_gyr_bias=True)
     plain = _whole(root, tmp_path / "plain.sto")
-    run_ximu3_streaming(root, "polaris", tmp_path / "st.sto", chunk_rows=rows,
+    run_sensors_streaming(root, "polaris", tmp_path / "st.sto", chunk_rows=rows,
                         remove_gyr_bias=True)  # fmt: skip
     # the bias summed piece by piece: the whole mean's rounding, to a unit in its last digit
     a, b = read_table(tmp_path / "st.sto"), read_table(whole)
@@ -104,7 +104,7 @@ def test_the_rest_bias_removed_in_pieces_as_from_the_whole(tmp_path: Path, rows:
 
 def test_one_sensor_selected_keeps_its_own_clock(tmp_path: Path) -> None:
     root = _export(tmp_path / "export")
-    rep = run_ximu3_streaming(root, "polaris", tmp_path / "st.csv", sensors=["Thigh"],
+    rep = run_sensors_streaming(root, "polaris", tmp_path / "st.csv", sensors=["Thigh"],
                               chunk_rows=50)  # fmt: skip
     rec = read_ximu3_sensor(next(root.glob("Thigh*")))
     q = make_filter("polaris", rec.rate_hz).run_recording(rec, use_mag=True)
@@ -113,7 +113,7 @@ def test_one_sensor_selected_keeps_its_own_clock(tmp_path: Path) -> None:
     np.testing.assert_allclose(table[:, 1:], q.quat, atol=1e-9)
     assert rep.rows == rec.n_samples
     with pytest.raises(ConfigError, match="--sensor Knee: not in .*sensors: Shank, Thigh"):
-        run_ximu3_streaming(root, "polaris", tmp_path / "x.sto", sensors=["Knee"])
+        run_sensors_streaming(root, "polaris", tmp_path / "x.sto", sensors=["Knee"])
 
 
 def test_time_going_back_in_a_later_block_names_the_row(tmp_path: Path) -> None:
@@ -125,7 +125,7 @@ def test_time_going_back_in_a_later_block_names_the_row(tmp_path: Path) -> None:
     lines[1 + 120] = ",".join(cells)
     f.write_text("\n".join(lines) + "\n")
     with pytest.raises(FileFormatError, match="not increasing at data row 120 \\(line 122"):
-        run_ximu3_streaming(root, "polaris", tmp_path / "x.sto", chunk_rows=50)
+        run_sensors_streaming(root, "polaris", tmp_path / "x.sto", chunk_rows=50)
 
 
 def test_cli_streams_an_export(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -158,7 +158,7 @@ def test_offline_smoothing_of_an_export_in_pieces(tmp_path: Path) -> None:
         series.append(OrientationSeries(r.time, q, name=r.name))
     t = common_time_base(series)
     want = np.stack([resample_orientation(s, t) for s in series], axis=1)
-    rep = run_ximu3_streaming(root, "polaris", tmp_path / "st.sto", chunk_rows=53,
+    rep = run_sensors_streaming(root, "polaris", tmp_path / "st.sto", chunk_rows=53,
                               offline=True, workdir=tmp_path)  # fmt: skip
     got = read_table(tmp_path / "st.sto")
     np.testing.assert_allclose(got.time, t - t[0], atol=1e-9)
@@ -166,4 +166,4 @@ def test_offline_smoothing_of_an_export_in_pieces(tmp_path: Path) -> None:
     assert rep.rows == len(t)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["export", "st.sto"]
     with pytest.raises(ConfigError, match="has no offline mode"):
-        run_ximu3_streaming(root, "bachmann", tmp_path / "b.sto", offline=True)
+        run_sensors_streaming(root, "bachmann", tmp_path / "b.sto", offline=True)

@@ -62,10 +62,11 @@ def _cmd_presets(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _is_ximu3(path: Path) -> bool:
-    from mocapkit.io.ximu3 import is_ximu3_export
+def _is_export(path: Path) -> bool:
+    """An export of sensors on their own clocks: x-IMU3 or Xsens."""
+    from mocapkit.imu.sensor_streams import is_sensor_export
 
-    return is_ximu3_export(path)
+    return is_sensor_export(path)
 
 
 def _stream_raw(tree: Any, args: argparse.Namespace, options: dict[str, Any]) -> Any:
@@ -77,20 +78,19 @@ def _stream_raw(tree: Any, args: argparse.Namespace, options: dict[str, Any]) ->
 
     from mocapkit.body.streamed import stream_body
     from mocapkit.imu.sensor_spill import body_pieces
-    from mocapkit.imu.streaming import spill_ximu3, spill_ximu3_device
-    from mocapkit.io.ximu3 import ximu3_sensors
+    from mocapkit.imu.sensor_streams import sensor_names, spill_device, spill_filtered
 
     # the whole path's message for a sensor the export lacks
-    tree.check_sensors(list(ximu3_sensors(Path(args.recording))))
+    tree.check_sensors(sensor_names(Path(args.recording)))
     crop = (options.get("start"), options.get("stop"))  # cropped as the sensors are spilled
     options = {k: v for k, v in options.items() if k not in ("start", "stop")}
     with tempfile.TemporaryDirectory(prefix="mocapkit-body-") as tmp:
         sensors = [s.sensor for s in tree.segments]
         if args.filter:
-            spills = spill_ximu3(Path(args.recording), args.filter, args.mode, tmp,
+            spills = spill_filtered(Path(args.recording), args.filter, args.mode, tmp,
                                  sensors=sensors, crop=crop)  # fmt: skip
         else:
-            spills = spill_ximu3_device(Path(args.recording), tmp, sensors, crop=crop)
+            spills = spill_device(Path(args.recording), tmp, sensors, crop=crop)
         try:
             return stream_body(tree, args.recording, output=args.output,
                                segments_output=args.segments, pieces=body_pieces(spills),
@@ -125,7 +125,7 @@ def _cmd_angles(args: argparse.Namespace) -> int:
     # nothing needs the whole recording: filtered, aligned and turned into angles in pieces
     # (without --filter: the devices' own orientations, in the same pieces)
     raw_streamed = (
-        _is_ximu3(Path(args.recording)) and not args.bvh
+        _is_export(Path(args.recording)) and not args.bvh
         and (alignment != "joints" or bool(args.calibration_in))
     )  # fmt: skip
     streamed = streamed or raw_streamed

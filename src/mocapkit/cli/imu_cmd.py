@@ -319,25 +319,25 @@ def _run(args: argparse.Namespace) -> int:
 
 def _streams(args: argparse.Namespace) -> bool:
     """Read, filtered and written piece by piece: one mocapkit IMU CSV or BROAD .hdf5
-    trial (online, or smoothed offline through files on disk), or an x-IMU3 export (every
-    sensor on its own clock through files on disk, online or smoothed, then resampled onto
-    one time base)."""
-    from mocapkit.io.ximu3 import is_ximu3_sensor, ximu3_sensor_dirs
+    trial (online, or smoothed offline through files on disk), or an x-IMU3 or Xsens
+    export (every sensor on its own clock through files on disk, filtered online or
+    smoothed, or its device orientations, then resampled onto one time base)."""
+    from mocapkit.imu.sensor_streams import is_sensor_export
 
     path = Path(args.path)
-    if args.filter_name == DEVICE:
-        return False
     if path.is_file():
-        return path.suffix.lower() in (".csv", ".hdf5", ".h5") and not args.sensor
-    return path.is_dir() and (is_ximu3_sensor(path) or bool(ximu3_sensor_dirs(path)))
+        return (args.filter_name != DEVICE and path.suffix.lower() in (".csv", ".hdf5", ".h5")
+                and not args.sensor)  # fmt: skip
+    return is_sensor_export(path)
 
 
 def _run_streamed(args: argparse.Namespace) -> int:
-    from mocapkit.imu.streaming import run_file_offline, run_file_streaming, run_ximu3_streaming
+    from mocapkit.imu.sensor_streams import run_sensors_streaming
+    from mocapkit.imu.streaming import run_file_offline, run_file_streaming
 
     path = Path(args.path)
     if path.is_dir():
-        rep = run_ximu3_streaming(path, args.filter_name, args.output, mode=args.mode,
+        rep = run_sensors_streaming(path, args.filter_name, args.output, mode=args.mode,
                                   params=dict(args.param), sensors=args.sensor or None,
                                   remove_gyr_bias=args.remove_gyr_bias,
                                   offline=args.offline)  # fmt: skip

@@ -62,13 +62,14 @@ PIECE_FRAMES = 5000
 def streamable(path: str | Path) -> bool:
     """Whether ``path`` is retargeted piece by piece: a joint-angle file, an OpenSense
     orientation table, a marker trial or an x-IMU3 export (:func:`retarget_streamed`)."""
-    return Path(path).suffix.lower() in ANGLE_SUFFIXES + MARKER_SUFFIXES or _is_ximu3(Path(path))
+    return Path(path).suffix.lower() in ANGLE_SUFFIXES + MARKER_SUFFIXES or _is_export(Path(path))
 
 
-def _is_ximu3(path: Path) -> bool:
-    from mocapkit.io.ximu3 import is_ximu3_export
+def _is_export(path: Path) -> bool:
+    """An export of sensors on their own clocks: x-IMU3 or Xsens."""
+    from mocapkit.imu.sensor_streams import is_sensor_export
 
-    return is_ximu3_export(path)
+    return is_sensor_export(path)
 
 
 @dataclass
@@ -193,7 +194,7 @@ def retarget_streamed(
                   "guard_collisions": guard_collisions}  # fmt: skip
     if path.suffix.lower() in MARKER_SUFFIXES:
         return _markers(path, robot, output, height_m, piece_frames, collisions)
-    if _is_ximu3(path):
+    if _is_export(path):
         return _orientations(path, robot, output, preset, piece_frames, collisions)
     if table_is_quaternion(path):
         return _orientations(path, robot, output, preset, piece_frames, collisions)
@@ -229,14 +230,13 @@ def _orientations(
     tree = SensorTree.preset(preset)
     with tempfile.TemporaryDirectory(dir=_beside(output), prefix=".mocapkit-retarget-") as d:
         angles = Path(d) / f"{path.name}.mot"
-        if _is_ximu3(path):
+        if _is_export(path):
             from mocapkit.imu.sensor_spill import body_pieces
-            from mocapkit.imu.streaming import spill_ximu3_device
-            from mocapkit.io.ximu3 import ximu3_sensors
+            from mocapkit.imu.sensor_streams import sensor_names, spill_device
 
             # the whole path's message for a sensor the export lacks
-            tree.check_sensors(list(ximu3_sensors(path)))
-            spills = spill_ximu3_device(path, d, [s.sensor for s in tree.segments], rows)
+            tree.check_sensors(sensor_names(path))
+            spills = spill_device(path, d, [s.sensor for s in tree.segments], rows)
             try:
                 stream_body(tree, path, output=angles, calibration="auto",
                             heading_alignment="hinges", pieces=body_pieces(spills))  # fmt: skip
