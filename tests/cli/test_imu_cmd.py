@@ -133,7 +133,7 @@ def test_run_sensor_selection_error(tmp_path: Path, capsys: pytest.CaptureFixtur
     path = _csv_recording(tmp_path)
     code = main(["imu", "run", str(path), "--filter", "miller", "--sensor", "x", "-o", "o.sto"])
     assert code == 1
-    assert "--sensor: x not in" in capsys.readouterr().err
+    assert "--sensor x: not in" in capsys.readouterr().err
 
 
 @pytest.mark.shared_data

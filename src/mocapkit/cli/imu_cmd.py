@@ -240,22 +240,12 @@ def _evaluate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _select(items: dict[str, Any], wanted: list[str], path: Path) -> dict[str, Any]:
-    if not wanted:
-        return items
-    missing = [s for s in wanted if s not in items]
-    if missing:
-        raise DataError(
-            f"--sensor: {', '.join(missing)} not in {path}; available: {', '.join(items)}"
-        )
-    return {k: items[k] for k in wanted}
-
-
 def _run(args: argparse.Namespace) -> int:
     from mocapkit.imu.evaluation import check_offline
     from mocapkit.imu.filters import make_filter
     from mocapkit.imu.filters.base import recording_steps
     from mocapkit.imu.resample import common_time_base, resample_orientation
+    from mocapkit.imu.sensor_streams import select_sensors
     from mocapkit.io.imu_files import read_device_orientations, read_imu_recordings
     from mocapkit.io.opensim_table import write_table
     from mocapkit.series import OrientationSeries
@@ -269,9 +259,9 @@ def _run(args: argparse.Namespace) -> int:
         return _run_streamed(args)
     series: dict[str, OrientationSeries] = {}
     if args.filter_name == DEVICE:
-        series = _select(read_device_orientations(args.path), args.sensor, args.path)
+        series = select_sensors(read_device_orientations(args.path), args.sensor, args.path)
     else:
-        recs = _select(read_imu_recordings(args.path), args.sensor, args.path)
+        recs = select_sensors(read_imu_recordings(args.path), args.sensor, args.path)
         prepare = _bias_remover(args.remove_gyr_bias)
         for name, rec in progress(list(recs.items()), args.filter_name, total=len(recs)):
             rec = prepare(rec) if prepare else rec
@@ -377,11 +367,12 @@ def _write_quat_csv(path: Path, time: Any, labels: list[str], quats: Any) -> Non
 
 def _calibrate_mag(args: argparse.Namespace) -> int:
     from mocapkit.imu.mag_calibration import fit_mag_calibration
+    from mocapkit.imu.sensor_streams import select_sensors
     from mocapkit.io.imu_csv import write_imu_csv
     from mocapkit.io.imu_files import read_imu_recordings
     from mocapkit.series import ImuRecording
 
-    recs = _select(read_imu_recordings(args.path), args.sensor, args.path)
+    recs = select_sensors(read_imu_recordings(args.path), args.sensor, args.path)
     if args.output is not None and len(recs) != 1:
         raise ConfigError(
             f"-o: {len(recs)} sensors in {args.path}; choose one with --sensor to write it"

@@ -99,7 +99,11 @@ def device_sources(path: Path, rows: int = SENSOR_CHUNK_ROWS) -> dict[str, Devic
     return {name: partial(device, s, first, last) for name, s in streams.items()}
 
 
-def _select(available: dict[str, Any], sensors: list[str] | None, path: Path) -> dict[str, Any]:
+def select_sensors(
+    available: dict[str, Any], sensors: list[str] | None, path: str | Path
+) -> dict[str, Any]:
+    """``available`` (by sensor name) cut to ``sensors`` in that order (``imu run
+    --sensor``; None or empty: all); an unknown name is refused naming the ones there are."""
     if not sensors:
         return available
     unknown = [s for s in sensors if s not in available]
@@ -156,7 +160,7 @@ def spill_filtered(
     run over the whole recording first, as ``body angles --start/--stop`` does)."""
     from mocapkit.imu.sensor_spill import SensorSpill, filter_pieces
 
-    sources = _select(raw_sources(path, chunk_rows), sensors, path)
+    sources = select_sensors(raw_sources(path, chunk_rows), sensors, path)
     rep = report if report is not None else StreamReport()
     rep.sensor, rep.sensors = ", ".join(sources), list(sources)
     spills = [SensorSpill(directory, name, i) for i, name in enumerate(sources)]
@@ -204,7 +208,7 @@ def spill_device(
     ``directory``; ``crop`` as :func:`spill_filtered`."""
     from mocapkit.imu.sensor_spill import SensorSpill
 
-    sources = _select(device_sources(path, chunk_rows), sensors, path)
+    sources = select_sensors(device_sources(path, chunk_rows), sensors, path)
     spills = [SensorSpill(directory, name, i) for i, name in enumerate(sources)]
     try:
         for spill, read in zip(spills, sources.values(), strict=True):
