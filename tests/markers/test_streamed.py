@@ -13,9 +13,10 @@ from mocapkit.errors import DataError
 from mocapkit.io.opensim_table import read_table
 from mocapkit.io.trc import TrcStream, read_trc, write_trc
 from mocapkit.markers import streamed
-from mocapkit.markers.cleaning import find_gaps
-from mocapkit.markers.reconstruct import ReconstructionOptions, run
-from mocapkit.markers.streamed import _GapTally, reconstruct_streamed
+from mocapkit.markers.cleaning import CleaningReport, fill_candidates, find_gaps
+from mocapkit.markers.reconstruct import ReconstructionOptions, _Warnings, run, warn_open_gaps
+from mocapkit.markers.streamed import reconstruct_streamed
+from mocapkit.markers.streamed_cleaning import find_gaps_spilled
 from mocapkit.markers.trajectories import MarkerTrajectories
 from tests.markers import synthetic
 
@@ -123,16 +124,16 @@ def test_gap_tally_counts_what_the_whole_trial_finds(seed: int) -> None:
     names = tuple(f"m{i}" for i in range(m))
     gaps, _ = find_gaps(MarkerTrajectories(np.arange(n) / 100.0, pos, names))
     interior = [g for g in gaps if g.start > 0 and g.stop < n]
-    tally = _GapTally(m)
-    cuts = np.sort(rng.choice(np.arange(1, n), size=9, replace=False))
-    for a, b in zip([0, *cuts], [*cuts, n], strict=True):
-        tally.add(vis[a:b], int(a))
-    assert tally.count == len(interior)
+    chunk = int(rng.integers(3, 40))  # pieces that cut gaps anywhere
+    report = CleaningReport()
+    report.gaps_found, _ = find_gaps_spilled(lambda a, b: vis[a:b], n, names, chunk)
+    fill_candidates(report, n, 100.0, "none", 0.0, None, names)
+    warned = _Warnings()
+    warn_open_gaps(report, n, 100.0, warned)
+    assert f"{len(interior)} gaps are not filled" in str(list(warned))
     worst = max(interior, key=lambda g: g.length)
-    assert tally.warning(names, 100.0) is not None
-    assert f"longest: {worst.marker}, frames {worst.start}-{worst.stop - 1}" in str(
-        tally.warning(names, 100.0)
-    )
+    assert list(warned)
+    assert f"longest: {worst.marker}, frames {worst.start}-{worst.stop - 1}" in str(list(warned))
 
 
 def test_trc_blocks_equal_the_whole_read() -> None:

@@ -73,6 +73,25 @@ class SensorSpill:
         self.quat.close()
 
 
+def first_piece_filter(
+    piece: ImuRecording, filter_name: str, params: dict[str, Any] | None,
+    source: str | Path | None = None,
+) -> Any:  # fmt: skip
+    """The filter for a recording read in pieces, made from its first piece: its units
+    checked (a gyroscope in deg/s), at least two rows to know the rate from. ``source``
+    names the recording in messages (default: the sensor's name)."""
+    from mocapkit.imu.filters import make_filter
+    from mocapkit.io.imu_files import check_units
+
+    check_units(piece)
+    if piece.n_samples < 2:
+        raise ConfigError(
+            f"{source or piece.name}: {piece.n_samples} data row: at least 2 are needed to "
+            "know the sampling rate"
+        )
+    return make_filter(filter_name, piece.rate_hz, **(params or {}))
+
+
 def filter_pieces(
     pieces: Iterable[ImuRecording], filter_name: str, mode: str,
     params: dict[str, Any] | None = None, source: str | Path | None = None,
@@ -80,20 +99,11 @@ def filter_pieces(
     """Each piece through one filter object, its state carried: ``(piece, q (n, 4), the
     filter's last_report)``; the first piece's units are checked (a gyroscope in deg/s).
     ``source`` names the recording in messages (default: the sensor's name)."""
-    from mocapkit.imu.filters import make_filter
-    from mocapkit.io.imu_files import check_units
-
     filt = None
     t_last = 0.0
     for piece in pieces:
         if filt is None:
-            check_units(piece)
-            if piece.n_samples < 2:
-                raise ConfigError(
-                    f"{source or piece.name}: {piece.n_samples} data row: at least 2 are "
-                    "needed to know the sampling rate"
-                )
-            filt = make_filter(filter_name, piece.rate_hz, **(params or {}))
+            filt = first_piece_filter(piece, filter_name, params, source)
             steps = np.concatenate([[filt.params.dt], np.diff(piece.time)])
         else:
             steps = np.concatenate([[piece.time[0] - t_last], np.diff(piece.time)])

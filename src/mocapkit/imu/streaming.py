@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from mocapkit._validate import FloatArray
-from mocapkit.errors import ConfigError, DataError
+from mocapkit.errors import DataError
 from mocapkit.io.imu_csv import CHUNK_ROWS, iter_imu_csv
 from mocapkit.io.opensim_table import QuaternionTableWriter
 from mocapkit.series import ImuRecording
@@ -201,8 +201,7 @@ def _spill_pieces(
     time to ``store``. Returns the filter, the accelerometer and magnetometer flags (N,)
     and the rate [Hz]."""
     from mocapkit.imu.evaluation import check_offline
-    from mocapkit.imu.filters import make_filter
-    from mocapkit.io.imu_files import check_units
+    from mocapkit.imu.sensor_spill import first_piece_filter
 
     filt: Any = None
     flags_acc: list[np.ndarray] = []
@@ -212,13 +211,7 @@ def _spill_pieces(
     t_last = 0.0
     for piece in pieces:
         if filt is None:
-            check_units(piece)
-            if piece.n_samples < 2:
-                raise ConfigError(
-                    f"{source}: {piece.n_samples} data row: at least 2 are needed to know "
-                    "the sampling rate"
-                )
-            filt = check_offline(make_filter(filter_name, piece.rate_hz, **(params or {})),
+            filt = check_offline(first_piece_filter(piece, filter_name, params, source),
                                  filter_name)  # fmt: skip
             rate = piece.rate_hz
             report.sensor = piece.name

@@ -43,7 +43,7 @@ from mocapkit.body.anthropometry import Sex
 from mocapkit.body.markersets import load_markerset
 from mocapkit.body.scaling import Subject
 from mocapkit.errors import ConfigError, DataError
-from mocapkit.markers.cleaning import _runs
+from mocapkit.markers.cleaning import CleaningReport, fill_candidates
 from mocapkit.markers.conventions import UnitCheck
 from mocapkit.markers.coverage import Coverage, MetricsTally
 from mocapkit.markers.pieces import piece_solver
@@ -70,7 +70,11 @@ from mocapkit.markers.result import (
     output_columns,
     write_csv_rows,
 )
-from mocapkit.markers.streamed_cleaning import fill_gaps_spilled, lowpass_spilled
+from mocapkit.markers.streamed_cleaning import (
+    fill_gaps_spilled,
+    find_gaps_spilled,
+    lowpass_spilled,
+)
 from mocapkit.markers.subject import check_static_is_not_trial, scaled_subject
 from mocapkit.markers.trajectories import MarkerTrajectories, check_whole_rows
 
@@ -235,57 +239,6 @@ def _spill(
         positions.close()
         raise
     return _Spilled(names, meta, times.rows, times, positions, ever, head_raw_traj, head_traj)
-
-
-@dataclass
-class _GapTally:
-    """Interior gaps of each marker (a run of missing frames with visible frames on both
-    sides), counted across pieces: the whole-trial path's "gaps not filled" warning."""
-
-    n_markers: int
-    open_since: list[int | None] = field(default_factory=list)
-    count: int = 0
-    longest: tuple[int, int, int] | None = None  # (length, marker, start)
-
-    def __post_init__(self) -> None:
-        self.open_since = [None] * self.n_markers
-
-    def add(self, visible: np.ndarray, offset: int) -> None:
-        """The next piece's (n, M) visibility, its first frame being ``offset``."""
-        n = visible.shape[0]
-        for m in range(self.n_markers):
-            since = self.open_since[m]
-            if since is not None and n and visible[0, m]:
-                self._closed(m, since, offset)  # the gap ended with the last piece
-                since = None
-            for a, b in _runs(~visible[:, m]):
-                start = since if a == 0 and since is not None else offset + a
-                since = None
-                if b < n:
-                    self._closed(m, start, offset + b)
-                else:
-                    since = start
-            self.open_since[m] = since
-
-    def _closed(self, m: int, start: int, stop: int) -> None:
-        if start == 0:
-            return  # an edge gap: the marker not yet seen
-        self.count += 1
-        key = (stop - start, m, start)
-        if self.longest is None or (key[0], -key[1], -key[2]) > (
-            self.longest[0], -self.longest[1], -self.longest[2]
-        ):  # fmt: skip
-            self.longest = key
-
-    def warning(self, names: tuple[str, ...], rate: float) -> str | None:
-        if not self.count or self.longest is None:
-            return None
-        length, m, start = self.longest
-        return (
-            f"{self.count} gaps are not filled (longest: {names[m]}, frames {start}-"
-            f"{start + length - 1}, {length / rate:.2f} s); those markers are left out of "
-            "those frames (--fill-gaps and --max-gap-s fill short gaps)"
-        )
 
 
 def _crop(options: ReconstructionOptions, ik_setup: str | Path | None) -> tuple[Any, Any]:
@@ -529,15 +482,15 @@ def _cleaned(
 
 
 def _gap_warning(sp: _Spilled, prep: Preparation, chunk: int, rate: float, warn: _Warnings) -> None:
-    """The interior gaps left open (no filling on this path), over the whole trial."""
-    tally = _GapTally(len(prep.names))
+    """The interior gaps left open (no filling asked for), over the whole trial, as the
+    whole-trial path warns about them (``fill_gaps(method="none")``)."""
     cols = list(prep.columns)
-    for a in range(0, sp.n, chunk):
-        b = min(sp.n, a + chunk)
-        tally.add(np.isfinite(sp.positions.read(a, b)[:, cols, 0]), a)
-    msg = tally.warning(prep.names, rate)
-    if msg is not None:
-        warn.add(msg)
+    report = CleaningReport()
+    report.gaps_found, report.never_visible = find_gaps_spilled(
+        lambda a, b: np.isfinite(sp.positions.read(a, b)[:, cols, 0]), sp.n, prep.names, chunk
+    )
+    fill_candidates(report, sp.n, rate, "none", 0.0, None, prep.names)  # all left open
+    warn_open_gaps(report, sp.n, rate, warn)
 
 
 def _track(

@@ -49,16 +49,17 @@ ORDER = 4
 
 
 def find_gaps_spilled(
-    positions: RowFile, n: int, names: Sequence[str], chunk: int
+    visible: Callable[[int, int], np.ndarray], n: int, names: Sequence[str], chunk: int
 ) -> tuple[list[Gap], list[str]]:
-    """:func:`mocapkit.markers.cleaning.find_gaps` over a file of (n, M, 3) positions."""
+    """:func:`mocapkit.markers.cleaning.find_gaps` over ``n`` frames whose (b - a, M)
+    visibility ``visible(a, b)`` gives, ``chunk`` frames at a time."""
     m_count = len(names)
     open_since: list[int | None] = [None] * m_count
     seen = np.zeros(m_count, dtype=bool)
     found: list[list[Gap]] = [[] for _ in range(m_count)]
     for a in range(0, n, chunk):
         b = min(n, a + chunk)
-        vis = np.isfinite(positions.read(a, b)[..., 0])
+        vis = visible(a, b)
         seen |= vis.any(axis=0)
         for m in range(m_count):
             since = open_since[m]
@@ -135,7 +136,9 @@ def fill_gaps_spilled(
     """:func:`mocapkit.markers.cleaning.fill_gaps` on the file, in place (module
     docstring); the same report."""
     report = CleaningReport()
-    report.gaps_found, report.never_visible = find_gaps_spilled(positions, n, names, chunk)
+    report.gaps_found, report.never_visible = find_gaps_spilled(
+        lambda a, b: np.isfinite(positions.read(a, b)[..., 0]), n, names, chunk
+    )
     for gap, m, donors in fill_candidates(report, n, rate, method, max_gap_s, clusters, names):
         if len(donors) >= 3:
             lo, hi = gap.start - 1, gap.stop + 1
