@@ -185,8 +185,8 @@ def calibrate_functional(
             worlds that share one heading (9D, a device's orientations): the hinges
             compared across the joints, then each segment aligned at the pose rather than
             headed by its own functional axis. On the simulated closed loop this is the
-            best choice in every case measured (``"shared"``: 1.44 -> 0.55 deg, with a
-            steel floor 2.05 -> 1.24, with a pose held 4 deg off 3.49 -> 3.16), and on the
+            best choice in every case measured (``"shared"``: 1.48 -> 0.57 deg, with a
+            steel floor 1.96 -> 1.08, with a pose held 4 deg off 3.53 -> 3.17), and on the
             x-IMU3 recording it makes left and right agree (subtalar means 9 / -14 deg
             with ``"shared"``, 2 / 1 deg), agreeing as well with the vendor's orientations
             (docs/benchmarks.md).
