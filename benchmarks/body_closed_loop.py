@@ -309,13 +309,16 @@ def main() -> None:
         "2026-11-27 the automatic calibrations lay each forearm's pose-calibrated tilt on "
         "the elbow's pronation axis (functional: twist) and turn the hand with it: with the "
         "pose held 4 deg off, elbow_flex 9.5 / 13.8 -> 1.8 / 7.6 deg (9D default). "
-        + (f"Since 2026-11-27 the truth is the reconstruction low-passed at "
-           f"{args.truth_lowpass_hz:g} Hz (zero phase) and taken to 100 Hz by a cubic "
-           "spline: before, marker noise and linear interpolation turned the forearm at up "
-           "to 350 deg/s from sample to sample (63 deg/s low-passed), motion no strapped "
-           "IMU feels; the earlier tables, raw truth, are in the git history "
-           "(`--truth-lowpass-hz 0` reproduces them)."
-           if args.truth_lowpass_hz else "Truth: the raw reconstruction (no low-pass).")
+        + (
+            f"Since 2026-11-27 the truth is the reconstruction low-passed at "
+            f"{args.truth_lowpass_hz:g} Hz (zero phase) and taken to 100 Hz by a cubic "
+            "spline: before, marker noise and linear interpolation turned the forearm at up "
+            "to 350 deg/s from sample to sample (63 deg/s low-passed), motion no strapped "
+            "IMU feels; the earlier tables, raw truth, are in the git history "
+            "(`--truth-lowpass-hz 0` reproduces them)."
+            if args.truth_lowpass_hz
+            else "Truth: the raw reconstruction (no low-pass)."
+        )
         + "\n\n"
         + "\n".join(lines)
     )
