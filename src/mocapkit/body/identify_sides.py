@@ -33,6 +33,7 @@ from mocapkit.body.joint_centres import (
     PairFit,
     centre_error,
     centre_in,
+    centre_swing,
     in_frame_of,
 )
 from mocapkit.body.sensor_tree import SensorTree
@@ -45,6 +46,13 @@ MIN_COUPLING = 0.25
 MIN_SIDE_SHARE = 0.3
 SURE_SIDE_SHARE = 0.9  # a joint-centre side this clear outweighs the gait
 MAX_CENTRE_ERROR = 0.25  # standard error of a joint centre, share of the separation
+# 6D: the side's geometry goes through the heading between the parent's and the limb's
+# worlds, which only the joint centre's horizontal acceleration shows; below this RMS
+# [m/s^2] (joint_centres.centre_swing) the side is not taken from the joint centres. A
+# simulated pelvis gliding at constant speed: 0.16-0.30 (the side wrong in 3 of 10 suits,
+# once at 0.91 of the separation); walking: 0.56-1.43 on the real recordings, 1.15-2.7
+# simulated with the pelvis bouncing and swaying. Set on those runs: no held-out set.
+MIN_CENTRE_SWING = 0.4
 
 
 def _canon(tree: SensorTree, i: int, children: list[list[int]]) -> str:
@@ -156,7 +164,7 @@ def decide_sides(
         coords = [c or "" for c in tree.segments[a].joint.coordinates]
         kind = "legs" if any(c.startswith("hip_") for c in coords) else "arms"
         evidence: list[tuple[float, str]] = []  # (signed score: + keeps, - swaps; text)
-        geo = _centre_side(tree, perm, a, b, kin, fits)
+        geo = _centre_side(tree, perm, a, b, kin, fits, headings)
         if geo is not None and abs(geo) >= MIN_SIDE_SHARE:
             evidence.append((geo, f"joint centres ({abs(geo):.2f} of the separation across "
                              "the body)"))  # fmt: skip
@@ -235,15 +243,22 @@ def _centre_side(
     b: int,
     kin: Kinematics | None,
     fits: dict[tuple[int, int], PairFit] | None,
+    headings: str = "shared",
 ) -> float | None:
     """Which side of the parent segment a's joint lies on, from the joint centres alone
     (no world heading, so 6D works): in the parent sensor's frame, down is along the limbs
     (parent joint -> next joint), forward is where the knees do not bend to (or where the
     elbows do), and right is forward x up. Returns the share of a's offset from b along
-    the right (+: a is on its named side; -: swap), or None without three-segment limbs."""
+    the right (+: a is on its named side; -: swap), or None without three-segment limbs,
+    or, with independent headings, when the joints' centres hardly accelerate
+    sideways (:data:`MIN_CENTRE_SWING`)."""
     if fits is None or kin is None:
         return None
     p = int(tree.parent_index[a])
+    if headings == "independent" and any(
+        centre_swing(kin, fits, int(perm[p]), int(perm[k])) < MIN_CENTRE_SWING for k in (a, b)
+    ):
+        return None
     fwd_p, up_p = [], []
     for seg in (a, b):
         limb = _limb(tree, seg)

@@ -45,16 +45,15 @@ from mocapkit._validate import FloatArray
 from mocapkit.body.joint_centres import (
     MAX_ACC,
     MIN_RATE,
-    SMOOTH_S,
-    _skew,
     fit_pair,
+    joint_terms,
     kinematics,
     world_rates,
 )
 from mocapkit.body.sensor_tree import SensorTree
 from mocapkit.body.timebase import align_orientations
 from mocapkit.errors import ConfigError
-from mocapkit.geometry import quat_mul, quat_rotate, quat_to_matrix
+from mocapkit.geometry import quat_mul
 from mocapkit.series import ImuRecording, OrientationSeries
 
 WINDOW_S = 6.0  # s of motion per heading estimate
@@ -96,11 +95,10 @@ def _rz(yaw: FloatArray) -> FloatArray:
 
 
 def _joint_acc(q: FloatArray, acc: FloatArray, o: FloatArray, rate: float) -> FloatArray:
-    """(N, 3) acceleration of the point ``o`` (sensor frame) in the sensor's world."""
-    w, alpha = world_rates(q, rate)
-    sw = _skew(w)
-    k = (_skew(alpha) + sw @ sw) @ quat_to_matrix(q)
-    return quat_rotate(q, acc) + np.einsum("nij,j->ni", k, o)
+    """(N, 3) acceleration of the point ``o`` (sensor frame) in the sensor's world, both
+    terms through one low-pass (:func:`mocapkit.body.joint_centres.joint_terms`)."""
+    k, a, _ = joint_terms(q, acc, rate)
+    return a + np.einsum("nij,j->ni", k, o)
 
 
 def _usable(qs: list[FloatArray], accs: list[FloatArray], rate: float) -> np.ndarray:
@@ -195,11 +193,8 @@ def align_headings_by_joints(
     acc = {}
     for s in tree.segments:
         rec = recordings[s.sensor]
-        a = np.column_stack([np.interp(t, rec.time, rec.acc[:, i]) for i in range(3)])
-        # smoothed as the angular rates are (joint_centres.world_rates): no lag between terms
-        n = max(1, round(SMOOTH_S * rate))
-        acc[s.sensor] = uniform_filter1d(uniform_filter1d(a, n, axis=0, mode="nearest"), n,
-                                         axis=0, mode="nearest")  # fmt: skip
+        # raw: joint_terms filters the accelerations with the rest of the equation
+        acc[s.sensor] = np.column_stack([np.interp(t, rec.time, rec.acc[:, i]) for i in range(3)])
     out = JointHeadings(t, {tree.segments[0].sensor: np.zeros(t.size)})
     parents = tree.parent_index
     for i, seg in enumerate(tree.segments):

@@ -98,6 +98,25 @@ def gait_coordinates(
     return t, coords, still_s
 
 
+def gait_root_path(
+    time: FloatArray, walk_start_s: float = 3.0, stride_s: float = 1.1
+) -> FloatArray:
+    """(N, 3) the pelvis's bounce, surge and sway about its mean speed for
+    :func:`gait_coordinates`' walk, in the body's ground frame (x forward, y up, z right;
+    ``segment_poses(root_path=...)``): 2.5 cm up and down twice a stride (lowest at the heel
+    strikes, when the hips are furthest apart), 1.5 cm forward and back as the walk slows at
+    mid-stance, 2 cm to the side of the standing leg once a stride (peak accelerations ~3,
+    ~2 and ~0.7 m/s^2, as measured at the pelvis in walking). Without them the pelvis
+    glides at constant speed, which leaves its accelerometer nearly nothing to show."""
+    ramp = np.clip((time - walk_start_s) / 1.0, 0.0, 1.0)
+    ramp = 0.5 - 0.5 * np.cos(np.pi * ramp)
+    phase = 2.0 * np.pi * np.clip(time - walk_start_s, 0.0, None) / stride_s
+    up = 0.025 * np.cos(2.0 * phase)  # the right heel strikes at a quarter stride
+    forward = -0.015 * np.sin(2.0 * phase)  # slowest at mid-stance, the highest point
+    right = 0.02 * np.sin(phase - 0.5 * np.pi)  # over the right foot at half a stride
+    return ramp[:, None] * np.column_stack([forward, up, right])
+
+
 def segment_poses(
     tree: SensorTree,
     time: FloatArray,
