@@ -57,7 +57,16 @@ def test_a_segment_turned_away_from_the_others_is_named() -> None:
     assert any(f.segment == "calcn_r" for f in res.calibration_findings)
 
 
-def test_worlds_aligned_at_the_pose_only_are_not_checked() -> None:
+def test_worlds_aligned_at_the_pose_only_name_the_segments_left_unaligned() -> None:
+    """Each sensor's heading its own: the offsets are not faults, but the segments with
+    no functional axis (here the pelvis) cannot be aligned, and are named with the fix."""
     tree, ori = _walk()
     cal = calibrate_functional(tree, ori, (0.0, 0.9), heading_alignment="pose")
-    assert check_calibration(tree, cal) == []
+    found = check_calibration(tree, cal)
+    assert [f.kind for f in found] == ["unaligned"]
+    pelvis = tree.segment("pelvis").sensor
+    assert f"pelvis (sensor {pelvis})" in found[0].message
+    assert "--heading-alignment joints" in found[0].message
+    assert "femur" not in found[0].message  # the hinged segments were aligned
+    with pytest.warns(CalibrationWarning, match="heading_alignment=pose"):
+        run_body(tree, ori, window=(0.0, 0.9), heading_alignment="pose")

@@ -98,8 +98,15 @@ def test_angles_on_the_ximu3_directory_with_a_filter(
     argv = ["body", "angles", str(d), "--preset", "lower_body", "--json"]
     assert main(argv) == 0
     device = json.loads(capsys.readouterr().out)
-    assert main([*argv, "--filter", "bachmann", "--mode", "6d", "--heading-alignment", "pose"]) == 0
+    from mocapkit.body.calibration_checks import CalibrationWarning
+
+    # 6D worlds aligned at the pose only: the pelvis, with no functional axis, is named
+    with pytest.warns(CalibrationWarning, match=r"pelvis \(sensor Pelvis\) has no functional"):
+        assert main([*argv, "--filter", "bachmann", "--mode", "6d", "--heading-alignment",
+                     "pose"]) == 0  # fmt: skip
     filt = json.loads(capsys.readouterr().out)
+    assert [c["kind"] for c in filt["calibration_checks"]] == ["unaligned"]
+    assert filt["calibration_checks"][0]["value_deg"] is None  # strict JSON: no NaN
     for report in (device, filt):
         assert 95.0 < report["coordinates"]["knee_angle_r"]["max_deg"] < 140.0
     assert main(["body", "angles", str(shared_data / "opensense" / "walking_orientations.sto"),

@@ -213,7 +213,8 @@ def findings_summary(
                 "kind": f.kind,
                 "segment": f.segment,
                 "sensor": f.sensor,
-                "value_deg": round(f.value_deg, 1),
+                # None where the finding has no size (unaligned segments): valid JSON
+                "value_deg": round(f.value_deg, 1) if np.isfinite(f.value_deg) else None,
                 "message": f.message,
             }
             for f in checks
