@@ -49,9 +49,10 @@ MAX_CENTRE_ERROR = 0.25  # standard error of a joint centre, share of the separa
 # 6D: the side's geometry goes through the heading between the parent's and the limb's
 # worlds, which only the joint centre's horizontal acceleration shows; below this RMS
 # [m/s^2] (joint_centres.centre_swing) the side is not taken from the joint centres. A
-# simulated pelvis gliding at constant speed: 0.16-0.30 (the side wrong in 3 of 10 suits,
-# once at 0.91 of the separation); walking: 0.56-1.43 on the real recordings, 1.15-2.7
-# simulated with the pelvis bouncing and swaying. Set on those runs: no held-out set.
+# simulated pelvis gliding at constant speed: 0.16-0.30 (the side against the gait in 2
+# of 10 lower-body suits, once at 0.91 of the separation, which outweighed it);
+# walking: 0.56-1.43 on the real recordings, 1.15-2.7 simulated with the pelvis bouncing
+# and swaying. Set on those runs: no held-out set.
 MIN_CENTRE_SWING = 0.4
 
 
